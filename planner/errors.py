@@ -17,3 +17,81 @@ class AutomatonError(PlannerError):
 
 class UnknownPropositionError(PlannerError):
     """A formula or word names a proposition that the labels do not provide."""
+
+
+class ScenarioError(PlannerError):
+    """A scenario (a case-study description) is malformed.
+
+    Attributes:
+        key: the dotted key the problem is about (``"regions.Goal.rects[1]"``), or ``None``.
+        line: the 1-based line of that key in the source file, or ``None`` when unknown
+            (a scenario built in code, not loaded from a file).
+        source: the file the scenario came from, or ``None``.
+        problem: the bare description of the problem, without location.
+    """
+
+    def __init__(
+        self,
+        problem: str,
+        *,
+        key: str | None = None,
+        line: int | None = None,
+        source: str | None = None,
+    ) -> None:
+        self.problem = problem
+        self.key = key
+        self.line = line
+        self.source = source
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = []
+        if self.source is not None:
+            where.append(str(self.source))
+        if self.line is not None:
+            where.append(f"line {self.line}")
+        prefix = ", ".join(where)
+        key = f"key '{self.key}': " if self.key is not None else ""
+        return f"{prefix}: {key}{self.problem}" if prefix else f"{key}{self.problem}"
+
+    def located(self, line: int | None, source: str | None) -> ScenarioError:
+        """A copy of this error (same class) carrying a file position."""
+        err = type(self)(self.problem, key=self.key, line=line, source=source)
+        err.__cause__ = self.__cause__
+        return err
+
+
+class ScenarioSyntaxError(ScenarioError):
+    """A scenario file is not valid TOML (the line is tomllib's)."""
+
+
+class MissingKeyError(ScenarioError):
+    """A required scenario key is absent."""
+
+
+class ScenarioTypeError(ScenarioError):
+    """A scenario value has the wrong type or shape (a string where a number is needed...)."""
+
+
+class ScenarioValueError(ScenarioError):
+    """A scenario value has the right type but an invalid value (a negative cell size...)."""
+
+
+class UnknownLabelError(ScenarioError):
+    """A formula, reward or setting names a label that no region defines."""
+
+
+class RegionOverlapError(ScenarioError):
+    """Regions that must be disjoint (the goal and the hazard) share a cell."""
+
+
+class RegionOutsideWorldError(ScenarioError):
+    """A region, cell or position lies (partly) outside the world."""
+
+
+class StartInHazardError(ScenarioError):
+    """The start position lies in a hazard cell."""
+
+
+class UnknownKeyError(ScenarioError):
+    """A scenario file holds a key the format does not define (often a typo)."""
