@@ -1,0 +1,251 @@
+"""Events a navigation run emits, and the observer contract that receives them.
+
+The runner never logs, prints or plots: it calls an :class:`Observer` (or several, through
+:class:`Observers`) at four points of each run, passing one of the dataclasses below. All
+positions are in world metres (origin at the world's lower-left corner, z up), all times in
+seconds, all probabilities in [0, 1], cells are flat indices ``i * ny + j`` (``nx * ny`` is
+the absorbing ``out`` state). Arrays are numpy ``float64``; an observer must not modify them.
+
+Order of calls for one run: ``on_run_start``, then ``on_synthesis`` for the initial synthesis
+(``step = 0``), then ``on_hop`` for every hop, with ``on_synthesis`` after each batch refit,
+and finally ``on_run_end``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from planner.scenario import Scenario
+
+Phase = Literal["exploration", "goal_reaching"]
+Source = Literal["LTL", "RL"]
+Outcome = Literal["success", "violation", "timeout"]
+
+PHASES: tuple[str, ...] = ("exploration", "goal_reaching")
+SOURCES: tuple[str, ...] = ("LTL", "RL")
+OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout")
+
+
+class EventError(ValueError):
+    """An event was built with a bad field (unknown phase, wrong array shape...)."""
+
+
+def _check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise EventError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def _as_array(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise EventError(f"{name} must be numeric, got {value!r}") from err
+    arr.flags.writeable = False
+    if arr.ndim != len(shape) or any(
+        want is not None and got != want for got, want in zip(arr.shape, shape, strict=True)
+    ):
+        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+        raise EventError(f"{name} must have shape {want}, got {arr.shape}")
+    return arr
+
+
+@dataclass(frozen=True)
+class RunStart:
+    """A run begins.
+
+    Attributes:
+        run_index: 0-based index of the run within the invocation.
+        scenario: the scenario being run (with the runner settings actually used).
+        seed: the seed of this run's random generator.
+    """
+
+    run_index: int
+    scenario: Scenario
+    seed: int
+
+
+@dataclass(frozen=True)
+class HopEvent:
+    """One hop, from an interstitial state to the next.
+
+    Attributes:
+        run_index: the run.
+        step: 0-based hop number within the run.
+        phase: ``"exploration"`` or ``"goal_reaching"``.
+        source: which policy chose the requested action, ``"LTL"`` or ``"RL"``.
+        backup: whether the low-level backup switch replaced the requested action.
+        requested_action: the action the policy chose (``"N1"``.. ``"W2"``).
+        executed_action: the action executed (differs from the request on a backup).
+        start_pos: CoM ``(x, y)`` at the departure interstitial state, m.
+        target: centre ``(x, y)`` of the executed action's target cell, m.
+        landing: CoM ``(x, y)`` at the next interstitial state, m.
+        com_path: ``(T, 3)`` CoM positions from departure to the next interstitial state, m.
+        foot: ``(3,)`` foot position at touchdown, m.
+        touchdown_time: time of the touchdown since the run started, s.
+        cell: flat index of the landing cell (``nx * ny`` for ``out``).
+        product_state: index of the product (IMDP x automaton) state after the hop.
+        p_worst: worst-case satisfaction probability of that product state.
+        reward: reward collected by this hop.
+        total_reward: reward collected in the run so far, this hop included.
+        com_time: optional ``(T,)`` times of the ``com_path`` samples since the run
+            started, s; recorders animate the CoM along ``sim_time`` when given.
+    """
+
+    run_index: int
+    step: int
+    phase: Phase
+    source: Source
+    backup: bool
+    requested_action: str
+    executed_action: str
+    start_pos: np.ndarray
+    target: np.ndarray
+    landing: np.ndarray
+    com_path: np.ndarray
+    foot: np.ndarray
+    touchdown_time: float
+    cell: int
+    product_state: int
+    p_worst: float
+    reward: float
+    total_reward: float
+    com_time: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        _check_choice("phase", self.phase, PHASES)
+        _check_choice("source", self.source, SOURCES)
+        for name in ("start_pos", "target", "landing"):
+            object.__setattr__(self, name, _as_array(name, getattr(self, name), (2,)))
+        object.__setattr__(self, "foot", _as_array("foot", self.foot, (3,)))
+        path = _as_array("com_path", self.com_path, (None, 3))
+        object.__setattr__(self, "com_path", path)
+        if self.com_time is not None:
+            times = _as_array("com_time", self.com_time, (path.shape[0],))
+            object.__setattr__(self, "com_time", times)
+
+
+@dataclass(frozen=True)
+class SynthesisEvent:
+    """The GPs were refitted and the strategy re-synthesised.
+
+    Attributes:
+        run_index: the run.
+        step: hops done in the run when the synthesis ran (0 for the initial one).
+        grid_x: ``(Gx,)`` x coordinates of the GP evaluation grid, m.
+        grid_y: ``(Gy,)`` y coordinates of the GP evaluation grid, m.
+        gp_mean: ``(Gx, Gy, 2)`` posterior mean of the landing error (x, y), m.
+        gp_std: ``(Gx, Gy, 2)`` posterior standard deviation of the landing error, m.
+        p_worst_initial: worst-case satisfaction probability of the initial product state.
+        timings: wall-clock seconds per stage (e.g. ``{"gp_fit": 0.8, "imdp": 0.1}``).
+    """
+
+    run_index: int
+    step: int
+    grid_x: np.ndarray
+    grid_y: np.ndarray
+    gp_mean: np.ndarray
+    gp_std: np.ndarray
+    p_worst_initial: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        gx = _as_array("grid_x", self.grid_x, (None,))
+        gy = _as_array("grid_y", self.grid_y, (None,))
+        object.__setattr__(self, "grid_x", gx)
+        object.__setattr__(self, "grid_y", gy)
+        for name in ("gp_mean", "gp_std"):
+            value = _as_array(name, getattr(self, name), (gx.size, gy.size, 2))
+            object.__setattr__(self, name, value)
+
+
+@dataclass(frozen=True)
+class RunEnd:
+    """A run ended.
+
+    Attributes:
+        run_index: the run.
+        outcome: ``"success"`` (goal), ``"violation"`` (hazard or out) or ``"timeout"``.
+        steps: number of hops.
+        reward: total reward collected.
+        switch_step: hop at which goal reaching began, or ``None`` if it never did.
+        p_switch: worst-case satisfaction probability at the switch, or ``None``.
+        backups: number of hops where the backup switch replaced the action.
+        seconds: wall-clock duration of the run, s.
+        timings: wall-clock seconds per stage summed over the run.
+    """
+
+    run_index: int
+    outcome: Outcome
+    steps: int
+    reward: float
+    switch_step: int | None
+    p_switch: float | None
+    backups: int
+    seconds: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _check_choice("outcome", self.outcome, OUTCOMES)
+
+
+@runtime_checkable
+class ObserverProtocol(Protocol):
+    """What the runner calls; any object with these four methods will do."""
+
+    def on_run_start(self, event: RunStart) -> None: ...
+    def on_hop(self, event: HopEvent) -> None: ...
+    def on_synthesis(self, event: SynthesisEvent) -> None: ...
+    def on_run_end(self, event: RunEnd) -> None: ...
+
+
+class Observer:
+    """Base class with no-op handlers: subclass and override the ones you need."""
+
+    def on_run_start(self, event: RunStart) -> None:
+        """A run begins."""
+
+    def on_hop(self, event: HopEvent) -> None:
+        """A hop was made."""
+
+    def on_synthesis(self, event: SynthesisEvent) -> None:
+        """The GPs were refitted and the strategy re-synthesised."""
+
+    def on_run_end(self, event: RunEnd) -> None:
+        """A run ended."""
+
+    def close(self) -> None:
+        """Release resources (files, streams); called once after the last run."""
+
+
+class Observers(Observer):
+    """Fans every event out to several observers, in the given order."""
+
+    def __init__(self, observers: Iterable[ObserverProtocol]) -> None:
+        self.observers = tuple(observers)
+
+    def on_run_start(self, event: RunStart) -> None:
+        for o in self.observers:
+            o.on_run_start(event)
+
+    def on_hop(self, event: HopEvent) -> None:
+        for o in self.observers:
+            o.on_hop(event)
+
+    def on_synthesis(self, event: SynthesisEvent) -> None:
+        for o in self.observers:
+            o.on_synthesis(event)
+
+    def on_run_end(self, event: RunEnd) -> None:
+        for o in self.observers:
+            o.on_run_end(event)
+
+    def close(self) -> None:
+        for o in self.observers:
+            close = getattr(o, "close", None)
+            if close is not None:
+                close()
