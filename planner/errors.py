@@ -17,3 +17,23 @@ class AutomatonError(PlannerError):
 
 class UnknownPropositionError(PlannerError):
     """A formula or word names a proposition that the labels do not provide."""
+
+
+class LTLSyntaxError(PlannerError):
+    """An LTL formula does not parse; the message names the position and what was expected.
+
+    Attributes:
+        position: 0-based character offset of the offending token in the formula.
+    """
+
+    def __init__(self, message: str, position: int) -> None:
+        super().__init__(message)
+        self.position = position
+
+
+class HOAError(PlannerError):
+    """A HOA (Hanoi Omega-Automata) text is malformed or unsupported; names the line."""
+
+
+class NondeterministicAutomatonError(HOAError):
+    """A HOA automaton is not deterministic (several initial states or overlapping edges)."""
