@@ -19,6 +19,26 @@ class UnknownPropositionError(PlannerError):
     """A formula or word names a proposition that the labels do not provide."""
 
 
+class LTLSyntaxError(PlannerError):
+    """An LTL formula does not parse; the message names the position and what was expected.
+
+    Attributes:
+        position: 0-based character offset of the offending token in the formula.
+    """
+
+    def __init__(self, message: str, position: int) -> None:
+        super().__init__(message)
+        self.position = position
+
+
+class HOAError(PlannerError):
+    """A HOA (Hanoi Omega-Automata) text is malformed or unsupported; names the line."""
+
+
+class NondeterministicAutomatonError(HOAError):
+    """A HOA automaton is not deterministic (several initial states or overlapping edges)."""
+
+
 class ScenarioError(PlannerError):
     """A scenario (a case-study description) is malformed.
 
@@ -77,8 +97,12 @@ class ScenarioValueError(ScenarioError):
     """A scenario value has the right type but an invalid value (a negative cell size...)."""
 
 
-class UnknownLabelError(ScenarioError):
+class UnknownLabelError(ScenarioError, UnknownPropositionError):
     """A formula, reward or setting names a label that no region defines."""
+
+
+class ScenarioFormulaError(ScenarioError):
+    """A scenario's LTL formula does not parse (the message gives the position)."""
 
 
 class RegionOverlapError(ScenarioError):

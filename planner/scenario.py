@@ -49,7 +49,7 @@ import math
 import re
 import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
@@ -59,17 +59,21 @@ from typing import Any
 import numpy as np
 
 from planner.errors import (
+    LTLSyntaxError,
     MissingKeyError,
     RegionOutsideWorldError,
     RegionOverlapError,
     ScenarioError,
+    ScenarioFormulaError,
     ScenarioSyntaxError,
     ScenarioTypeError,
     ScenarioValueError,
     StartInHazardError,
     UnknownKeyError,
     UnknownLabelError,
+    UnknownPropositionError,
 )
+from planner.ltl.parser import check_propositions, parse
 from planner.toml_lines import key_lines, line_of
 
 if sys.version_info >= (3, 11):
@@ -82,7 +86,17 @@ SHIPPED_SCENARIOS: tuple[str, ...] = ("a", "b", "c", "d")
 
 DEFAULT_FORMULA = "!Haz U Goal"
 _LABEL_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-_RESERVED_LABELS = frozenset({"true", "false"})
+
+
+def _is_proposition(label: str) -> bool:
+    """Whether ``label`` is an identifier that the LTL parser reads as that proposition."""
+    if not _LABEL_RE.match(label):
+        return False
+    try:
+        return parse(label).propositions() == {label}
+    except LTLSyntaxError:
+        return False
+
 
 Rect = tuple[float, float, float, float]
 Cell = tuple[int, int]
@@ -265,10 +279,11 @@ class Scenario:
         object.__setattr__(self, "start", (float(self.start[0]), float(self.start[1])))
         named = [(label, f"regions.{label}") for label in self.regions]
         for label, key in [*named, (self.hazard, "hazard"), (self.goal, "goal")]:
-            if not _LABEL_RE.match(label) or label in _RESERVED_LABELS:
+            if not _is_proposition(label):
                 raise ScenarioValueError(
-                    f"label {label!r} is not a valid proposition name "
-                    "(letters, digits and '_', not starting with a digit, not true/false)",
+                    f"label {label!r} is not a valid proposition name (letters, digits and "
+                    "'_', not starting with a digit, not an LTL keyword such as U, F, G, X, "
+                    "true)",
                     key=key,
                 )
         for label, region in self.regions.items():
@@ -341,19 +356,13 @@ class Scenario:
 
     def _check_formula(self) -> None:
         try:
-            from planner.ltl import check_propositions
-        except ImportError:  # TODO(scenario): remove once branch `ltl` is merged
-            return
-
-        try:
             check_propositions(self.formula, self.labels)
-        except ScenarioError:
-            raise
-        except ValueError as err:
-            cls = (
-                UnknownLabelError if "propos" in type(err).__name__.lower() else ScenarioValueError
-            )
-            raise cls(str(err), key="formula") from err
+        except UnknownPropositionError as err:
+            raise UnknownLabelError(str(err), key="formula") from err
+        except LTLSyntaxError as err:
+            raise ScenarioFormulaError(
+                f"formula {self.formula!r} does not parse: {err}", key="formula"
+            ) from err
 
     @property
     def labels(self) -> tuple[str, ...]:
@@ -433,8 +442,6 @@ class Scenario:
 
     def with_runner(self, **changes: Any) -> Scenario:
         """A copy with some runner settings changed (validated)."""
-        from dataclasses import replace
-
         return replace(self, runner=replace(self.runner, **changes))
 
 

@@ -10,12 +10,14 @@ from planner.errors import (
     RegionOutsideWorldError,
     RegionOverlapError,
     ScenarioError,
+    ScenarioFormulaError,
     ScenarioSyntaxError,
     ScenarioTypeError,
     ScenarioValueError,
     StartInHazardError,
     UnknownKeyError,
     UnknownLabelError,
+    UnknownPropositionError,
 )
 from planner.scenario import (
     SHIPPED_SCENARIOS,
@@ -231,3 +233,22 @@ def test_scenario_validates_when_built_in_code():
     assert s.with_runner(runs=3).runner.runs == 3
     with pytest.raises(ScenarioValueError, match=r"runner\.eps"):
         s.with_runner(eps=-1.0)
+
+
+def test_unknown_label_in_formula_names_formula_line():
+    text = BASE.replace('formula = "!Haz U Goal"', 'formula = "!Haz U (Goal & C)"')
+    err = _error(text, UnknownLabelError)
+    assert err.key == "formula" and err.line == 2 and "'C'" in str(err)
+    assert isinstance(err, UnknownPropositionError)
+
+
+def test_formula_syntax_error_and_user_formula():
+    err = _error(BASE.replace('"!Haz U Goal"', '"!Haz U"'), ScenarioFormulaError)
+    assert err.key == "formula" and "position" in str(err)
+    s = parse_scenario(BASE.replace('"!Haz U Goal"', '"(F A) & (!Haz U Goal)"'))
+    assert s.formula == "(F A) & (!Haz U Goal)"
+
+
+def test_labels_must_be_propositions():
+    err = _error(BASE.replace("[regions.A]", "[regions.F]"), ScenarioValueError)
+    assert err.key == "regions.F" and err.line == _line(BASE, "[regions.A]")

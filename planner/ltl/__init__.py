@@ -1,0 +1,1 @@
+"""LTL front end: parsing, simplification, translation to deterministic Rabin automata, HOA."""

@@ -1,0 +1,162 @@
+"""Determinisation of transition-based Büchi automata by Safra trees.
+
+Safra's construction ("On the complexity of omega-automata", FOCS 1988), in the
+transition-based form used by Schewe & Varghese ("Tight bounds for the determinisation and
+complementation of generalised Büchi automata", ATVA 2012). A Safra tree is an ordered tree
+of named nodes, each labelled with a non-empty set of NBA states; children's labels are
+disjoint subsets of their parent's, and their union is a proper subset of it. On letter
+``a`` the successor tree is computed by:
+
+1. every node's label ``L`` becomes ``delta(L, a)``, and the node gets a new youngest child
+   (with the smallest unused name) labelled with the states reached from ``L`` through an
+   *accepting* transition, ``delta_acc(L, a)``, if that set is non-empty;
+2. horizontal merge: a state that occurs in a node is removed from every younger sibling and
+   its descendants;
+3. nodes with empty labels are removed;
+4. vertical merge: a node whose label equals the union of its children's labels loses all
+   its descendants and is *marked*.
+
+A name is never reused in the step that frees it, so the deterministic automaton's states
+(tree, marked names) carry state-based Rabin acceptance: for every name ``i`` the pair
+``(G_i, B_i)`` with ``G_i`` the states in which ``i`` is marked and ``B_i`` those whose tree
+has no node ``i``. A run is accepted iff some name is eventually always present and marked
+infinitely often.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Node = tuple  # (name: int, label: int bitmask over NBA states, children: tuple[Node, ...])
+
+
+@dataclass
+class SafraResult:
+    """The deterministic automaton: ``table[s][a]``, state descriptions and Rabin pairs."""
+
+    table: list[list[int]]
+    names: list[str]
+    pairs: list[tuple[set[int], set[int]]]
+
+
+def determinise(
+    n_letters: int, initial: int, succ: list[list[int]], succ_acc: list[list[int]]
+) -> SafraResult:
+    """Determinise a transition-based Büchi automaton.
+
+    Args:
+        n_letters: alphabet size.
+        initial: initial NBA state.
+        succ: ``succ[q][a]``, bitmask of all ``a``-successors of NBA state ``q``.
+        succ_acc: ``succ_acc[q][a]``, bitmask of successors through accepting transitions.
+    """
+    delta_cache: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def delta(label: int, a: int) -> tuple[int, int]:
+        key = (label, a)
+        hit = delta_cache.get(key)
+        if hit is not None:
+            return hit
+        out = out_acc = 0
+        rest = label
+        while rest:
+            low = rest & -rest
+            q = low.bit_length() - 1
+            out |= succ[q][a]
+            out_acc |= succ_acc[q][a]
+            rest ^= low
+        delta_cache[key] = (out, out_acc)
+        return out, out_acc
+
+    def names_of(node: Node) -> int:
+        m = 1 << node[0]
+        for c in node[2]:
+            m |= names_of(c)
+        return m
+
+    def step(tree: Node | None, a: int) -> tuple[Node | None, int]:
+        if tree is None:
+            return None, 0
+        used = names_of(tree) | 1
+
+        def alloc() -> int:
+            nonlocal used
+            free = ~used & (used + 1)  # lowest zero bit
+            used |= free
+            return free.bit_length() - 1
+
+        def grow(node: Node) -> Node:
+            name, label, children = node
+            new_label, new_acc = delta(label, a)
+            kids = [grow(c) for c in children]
+            if new_acc:
+                kids.append((alloc(), new_acc, ()))
+            return (name, new_label, tuple(kids))
+
+        marks = 0
+
+        def prune(node: Node, forbidden: int) -> Node | None:
+            nonlocal marks
+            name, label, children = node
+            label &= ~forbidden
+            if not label:
+                return None
+            kids = []
+            covered = 0
+            for c in children:
+                r = prune(c, forbidden | covered)
+                if r is not None:
+                    kids.append(r)
+                    covered |= r[1]
+            if kids and covered == label:
+                marks |= 1 << name
+                return (name, label, ())
+            return (name, label, tuple(kids))
+
+        # Name 0 is never used, so that bit 0 of ``used`` is always set before alloc.
+        result = prune(grow(tree), 0)
+        return result, marks
+
+    start: tuple[Node | None, int] = ((1, 1 << initial, ()), 0)
+    index = {start: 0}
+    states = [start]
+    table: list[list[int]] = []
+    i = 0
+    while i < len(states):
+        tree = states[i][0]
+        row = []
+        for a in range(n_letters):
+            nxt = step(tree, a)
+            j = index.get(nxt)
+            if j is None:
+                j = len(states)
+                index[nxt] = j
+                states.append(nxt)
+            row.append(j)
+        table.append(row)
+        i += 1
+
+    present = [names_of(t) if t is not None else 0 for t, _ in states]
+    max_name = max((p.bit_length() for p in present), default=1)
+    pairs = []
+    for name in range(1, max_name):
+        bit = 1 << name
+        good = {s for s, (_, m) in enumerate(states) if m & bit}
+        if good:
+            bad = {s for s in range(len(states)) if not present[s] & bit}
+            pairs.append((good, bad))
+    return SafraResult(table, [_text(t, m) for t, m in states], pairs)
+
+
+def _text(tree: Node | None, marks: int) -> str:
+    if tree is None:
+        return "{}"
+
+    def go(node: Node) -> str:
+        name, label, children = node
+        states = ",".join(str(q) for q in range(label.bit_length()) if label >> q & 1)
+        flag = "!" if marks >> name & 1 else ""
+        inner = "".join(go(c) for c in children)
+        return f"{name}{flag}{{{states}}}" + (f"[{inner}]" if inner else "")
+
+    return go(tree)

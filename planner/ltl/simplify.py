@@ -1,0 +1,255 @@
+"""Negation normal form and rewrite-based simplification of LTL formulas.
+
+:func:`simplify` returns an equivalent formula in negation normal form (NNF): negation only on
+atomic propositions, no ``->``/``<->``/``xor``, ``&``/``|`` flattened, deduplicated and
+sorted. Negations are pushed with the dualities ``!X f = X !f``, ``!F f = G !f``,
+``!(f U g) = !f R !g``, ``!(f W g) = !f M !g``. The rewrite rules (each an LTL equivalence,
+see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 2000, and Etessami
+& Holzmann, CONCUR 2000) are applied bottom-up by the smart constructors:
+
+* constants: ``f & true = f``, ``f & false = false``, ``p & !p = false`` (duals for ``|``),
+  ``X true = true``, ``F false = false``, ``true U g = F g``, ``false R g = G g``,
+  ``f W false = G f``, ``f M true = F f``, ``f U false = false``, ``false M g = false``, ...
+* idempotence: ``F F f = F f``, ``G G f = G f``, ``f U f = f``, ``F G F f = G F f``,
+  ``G F G f = F G f``;
+* absorption: ``F(f U g) = F g``, ``F(f M g) = F(f & g)``, ``G(f R g) = G g``,
+  ``G(f W g) = G(f | g)``;
+* distribution: ``X f & X g = X(f & g)``, ``G f & G g = G(f & g)``, ``X f | X g =
+  X(f | g)``, ``F f | F g = F(f | g)``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from planner.ltl.syntax import FALSE, TRUE, Formula
+
+COSAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "F", "U", "M"})
+SAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "G", "R", "W"})
+
+
+def _neg_literal(f: Formula) -> Formula | None:
+    if f.op == "ap":
+        return Formula("!", (f,))
+    if f.op == "!":
+        return f.children[0]
+    return None
+
+
+def _flat(op: str, args) -> list[Formula]:
+    out: list[Formula] = []
+    for a in args:
+        if a.op == op:
+            out.extend(a.children)
+        else:
+            out.append(a)
+    return out
+
+
+def _finish(op: str, items: set[Formula], unit: Formula) -> Formula:
+    if not items:
+        return unit
+    if len(items) == 1:
+        return next(iter(items))
+    return Formula(op, tuple(sorted(items, key=Formula.sort_key)))
+
+
+def mk_and(*args: Formula) -> Formula:
+    items: set[Formula] = set()
+    xs: list[Formula] = []
+    gs: list[Formula] = []
+    for a in _flat("&", args):
+        if a is FALSE:
+            return FALSE
+        if a is TRUE:
+            continue
+        if a.op == "X":
+            xs.append(a.children[0])
+        elif a.op == "G":
+            gs.append(a.children[0])
+        else:
+            items.add(a)
+    if len(xs) > 1:
+        items.add(mk_X(mk_and(*xs)))
+    elif xs:
+        items.add(Formula("X", (xs[0],)))
+    if len(gs) > 1:
+        items.add(mk_G(mk_and(*gs)))
+    elif gs:
+        items.add(Formula("G", (gs[0],)))
+    if FALSE in items:
+        return FALSE
+    items.discard(TRUE)
+    for a in items:
+        n = _neg_literal(a)
+        if n is not None and n in items:
+            return FALSE
+    if len(items) > 1 and any(a.op == "&" for a in items):
+        return mk_and(*items)
+    return _finish("&", items, TRUE)
+
+
+def mk_or(*args: Formula) -> Formula:
+    items: set[Formula] = set()
+    xs: list[Formula] = []
+    fs: list[Formula] = []
+    for a in _flat("|", args):
+        if a is TRUE:
+            return TRUE
+        if a is FALSE:
+            continue
+        if a.op == "X":
+            xs.append(a.children[0])
+        elif a.op == "F":
+            fs.append(a.children[0])
+        else:
+            items.add(a)
+    if len(xs) > 1:
+        items.add(mk_X(mk_or(*xs)))
+    elif xs:
+        items.add(Formula("X", (xs[0],)))
+    if len(fs) > 1:
+        items.add(mk_F(mk_or(*fs)))
+    elif fs:
+        items.add(Formula("F", (fs[0],)))
+    if TRUE in items:
+        return TRUE
+    items.discard(FALSE)
+    for a in items:
+        n = _neg_literal(a)
+        if n is not None and n in items:
+            return TRUE
+    if len(items) > 1 and any(a.op == "|" for a in items):
+        return mk_or(*items)
+    return _finish("|", items, FALSE)
+
+
+def mk_X(f: Formula) -> Formula:
+    if f is TRUE or f is FALSE:
+        return f
+    return Formula("X", (f,))
+
+
+def mk_F(f: Formula) -> Formula:
+    if f is TRUE or f is FALSE or f.op == "F":
+        return f
+    if f.op == "U":
+        return mk_F(f.children[1])
+    if f.op == "M":
+        return mk_F(mk_and(*f.children))
+    if f.op == "G" and f.children[0].op == "F":
+        return f
+    return Formula("F", (f,))
+
+
+def mk_G(f: Formula) -> Formula:
+    if f is TRUE or f is FALSE or f.op == "G":
+        return f
+    if f.op == "R":
+        return mk_G(f.children[1])
+    if f.op == "W":
+        return mk_G(mk_or(*f.children))
+    if f.op == "F" and f.children[0].op == "G":
+        return f
+    return Formula("G", (f,))
+
+
+def mk_U(f: Formula, g: Formula) -> Formula:
+    if g is TRUE or g is FALSE or f is FALSE or f is g:
+        return g
+    if f is TRUE:
+        return mk_F(g)
+    return Formula("U", (f, g))
+
+
+def mk_R(f: Formula, g: Formula) -> Formula:
+    if g is TRUE or g is FALSE or f is TRUE or f is g:
+        return g
+    if f is FALSE:
+        return mk_G(g)
+    return Formula("R", (f, g))
+
+
+def mk_W(f: Formula, g: Formula) -> Formula:
+    if g is TRUE or f is TRUE:
+        return TRUE
+    if g is FALSE:
+        return mk_G(f)
+    if f is FALSE or f is g:
+        return g
+    return Formula("W", (f, g))
+
+
+def mk_M(f: Formula, g: Formula) -> Formula:
+    if g is FALSE or f is FALSE:
+        return FALSE
+    if g is TRUE:
+        return mk_F(f)
+    if f is TRUE or f is g:
+        return g
+    return Formula("M", (f, g))
+
+
+@lru_cache(maxsize=200_000)
+def _nnf(f: Formula, neg: bool) -> Formula:
+    op = f.op
+    if op == "true":
+        return FALSE if neg else TRUE
+    if op == "false":
+        return TRUE if neg else FALSE
+    if op == "ap":
+        return Formula("!", (f,)) if neg else f
+    if op == "!":
+        return _nnf(f.children[0], not neg)
+    if op in ("&", "|"):
+        parts = [_nnf(c, neg) for c in f.children]
+        return mk_or(*parts) if (op == "&") == neg else mk_and(*parts)
+    if op == "->":
+        a, b = f.children
+        return (
+            mk_and(_nnf(a, False), _nnf(b, True)) if neg else mk_or(_nnf(a, True), _nnf(b, False))
+        )
+    if op in ("<->", "xor"):
+        a, b = f.children
+        same = (op == "<->") != neg
+        if same:
+            return mk_or(
+                mk_and(_nnf(a, False), _nnf(b, False)), mk_and(_nnf(a, True), _nnf(b, True))
+            )
+        return mk_or(mk_and(_nnf(a, False), _nnf(b, True)), mk_and(_nnf(a, True), _nnf(b, False)))
+    if op == "X":
+        return mk_X(_nnf(f.children[0], neg))
+    if op == "F":
+        return mk_G(_nnf(f.children[0], True)) if neg else mk_F(_nnf(f.children[0], False))
+    if op == "G":
+        return mk_F(_nnf(f.children[0], True)) if neg else mk_G(_nnf(f.children[0], False))
+    a, b = (_nnf(c, neg) for c in f.children)
+    if op == "U":
+        return mk_R(a, b) if neg else mk_U(a, b)
+    if op == "R":
+        return mk_U(a, b) if neg else mk_R(a, b)
+    if op == "W":
+        return mk_M(a, b) if neg else mk_W(a, b)
+    if op == "M":
+        return mk_W(a, b) if neg else mk_M(a, b)
+    raise ValueError(f"unknown operator {op!r}")
+
+
+def simplify(f: Formula) -> Formula:
+    """An equivalent, simplified formula in negation normal form."""
+    return _nnf(f, False)
+
+
+def negate(f: Formula) -> Formula:
+    """The simplified NNF of ``!f``."""
+    return _nnf(f, True)
+
+
+def is_cosafe(f: Formula) -> bool:
+    """Whether NNF ``f`` is syntactically co-safe (only X, F, U, M as temporal operators)."""
+    return all(g.op in COSAFE_OPS for g in f.subformulas())
+
+
+def is_safe(f: Formula) -> bool:
+    """Whether NNF ``f`` is syntactically safe (only X, G, R, W as temporal operators)."""
+    return all(g.op in SAFE_OPS for g in f.subformulas())

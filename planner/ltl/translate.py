@@ -1,0 +1,195 @@
+"""Translation of LTL formulas to complete deterministic state-based Rabin automata.
+
+Pipeline:
+
+1. :func:`planner.ltl.simplify.simplify`: negation normal form and rewrite rules.
+2. Fast paths (exact, and minimal for their fragment):
+
+   * *syntactically co-safe* formulas (temporal operators ``X F U M`` only) and
+   * *syntactically safe* formulas (``X G R W`` only)
+
+   are translated to a DFA whose states are the formulas reached by progression
+   (:mod:`planner.ltl.progression`), minimised (Moore). A co-safe formula holds iff the
+   progression reaches ``true`` (one pair ``({true}, {})``); a safe formula iff it never
+   reaches ``false`` (one pair ``(S \\ {false}, {false})``). ``!Haz U Goal`` gives 3 states.
+3. Every other formula: tableau to a transition-based generalised Büchi automaton
+   (Gerth-Peled-Vardi-Wolper 1995 / Couvreur 1999, :mod:`planner.ltl.tableau`), counter
+   degeneralisation to a transition-based Büchi automaton, removal of states with an empty
+   language, Safra's determinisation to state-based Rabin acceptance (Safra 1988,
+   :mod:`planner.ltl.safra`). If the formula's negation is co-safe or safe, or if its
+   determinised negation is smaller, the translator also builds the automaton of ``!f``
+   from its DFA only when the complement stays Rabin-expressible as one pair (complement of
+   a co-safe DFA is a safety automaton and vice versa).
+4. :func:`planner.ltl.reduce.reduce_rabin`: reachable part, SCC-local acceptance clean-up,
+   merge of empty-language states, bisimulation quotient, pair clean-up.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from planner.automaton import RabinAutomaton, RabinPair
+from planner.errors import AutomatonError
+from planner.ltl.parser import parse
+from planner.ltl.progression import FF, TT, Progression, explore
+from planner.ltl.reduce import reduce_rabin
+from planner.ltl.safra import determinise
+from planner.ltl.simplify import is_cosafe, is_safe, simplify
+from planner.ltl.syntax import Formula
+from planner.ltl.tableau import build_tgba
+
+
+def _alphabet(formula: Formula, propositions: Sequence[str] | None) -> tuple[str, ...]:
+    used = formula.propositions()
+    if propositions is None:
+        return tuple(sorted(used))
+    props = tuple(str(p) for p in propositions)
+    if len(set(props)) != len(props):
+        raise AutomatonError(f"duplicate propositions in {props}")
+    missing = sorted(used - set(props))
+    if missing:
+        raise AutomatonError(
+            f"the formula uses proposition {missing[0]!r}, which is not in the given "
+            f"alphabet {props}"
+        )
+    return props
+
+
+def _progression_dfa(f: Formula, props: tuple[str, ...], cosafe: bool):
+    prog = Progression(props)
+    states, table = explore(prog, prog.dnf(f))
+    tt = np.array([s == TT for s in states])
+    ff = np.array([s == FF for s in states])
+    pairs = [(tt, np.zeros_like(tt))] if cosafe else [(~ff, ff)]
+    return np.array(table, dtype=np.int64), 0, pairs, [prog.text(s) for s in states]
+
+
+def _safra(f: Formula, props: tuple[str, ...]):
+    tgba = build_tgba(f, props)
+    n_letters = 1 << len(props)
+    k = tgba.n_acc
+    levels = max(k, 1)
+    full = (1 << k) - 1
+    # Degeneralisation: state (q, level); an edge is accepting when it completes a round.
+    n = len(tgba.states) * levels
+    succ = [[0] * n_letters for _ in range(n)]
+    succ_acc = [[0] * n_letters for _ in range(n)]
+    for q, edges in enumerate(tgba.edges):
+        for lvl in range(levels):
+            src = q * levels + lvl
+            row, row_acc = succ[src], succ_acc[src]
+            for letters, target, acc in edges:
+                j = lvl
+                while j < k and acc >> j & 1:
+                    j += 1
+                accepting = j >= k or acc == full
+                if j >= k:
+                    j = 0
+                bit = 1 << (target * levels + j)
+                rest = letters
+                while rest:
+                    low = rest & -rest
+                    a = low.bit_length() - 1
+                    row[a] |= bit
+                    if accepting:
+                        row_acc[a] |= bit
+                    rest ^= low
+    # Keep only states from which an accepting cycle is reachable.
+    useful = _nonempty_states(succ, succ_acc, n, n_letters)
+    mask = sum(1 << q for q in range(n) if useful[q])
+    succ = [[m & mask for m in row] for row in succ]
+    succ_acc = [[m & mask for m in row] for row in succ_acc]
+    res = determinise(n_letters, 0, succ, succ_acc)
+    size = len(res.table)
+    pairs = []
+    for good, bad in res.pairs:
+        g = np.zeros(size, dtype=bool)
+        b = np.zeros(size, dtype=bool)
+        g[list(good)] = True
+        b[list(bad)] = True
+        pairs.append((g, b))
+    return np.array(res.table, dtype=np.int64), 0, pairs, res.names
+
+
+def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    src, dst, acc_src, acc_dst = [], [], [], []
+    for q in range(n):
+        for a in range(n_letters):
+            m, ma = succ[q][a], succ_acc[q][a]
+            while m:
+                low = m & -m
+                t = low.bit_length() - 1
+                src.append(q)
+                dst.append(t)
+                if ma & low:
+                    acc_src.append(q)
+                    acc_dst.append(t)
+                m ^= low
+    src_a, dst_a = np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)
+    graph = csr_matrix((np.ones(src_a.size, dtype=np.int8), (src_a, dst_a)), shape=(n, n))
+    _, labels = connected_components(graph, directed=True, connection="strong")
+    a_src, a_dst = np.array(acc_src, dtype=np.int64), np.array(acc_dst, dtype=np.int64)
+    good_scc = np.zeros(labels.max() + 1, dtype=bool)
+    same = labels[a_src] == labels[a_dst]
+    good_scc[labels[a_src[same]]] = True
+    reached = good_scc[labels]
+    while True:
+        new = reached.copy()
+        new[src_a[reached[dst_a]]] = True
+        if new.sum() == reached.sum():
+            return reached
+        reached = new
+
+
+def _expand_alphabet(table: np.ndarray, own: tuple[str, ...], props: tuple[str, ...]):
+    """Re-index letters from the formula's own propositions to the full alphabet."""
+    if own == props:
+        return table
+    letters = np.arange(1 << len(props))
+    proj = np.zeros_like(letters)
+    for i, p in enumerate(own):
+        proj |= ((letters >> props.index(p)) & 1) << i
+    return table[:, proj]
+
+
+def translate(formula: str | Formula, propositions: Sequence[str] | None = None) -> RabinAutomaton:
+    """Translate an LTL formula to an equivalent complete deterministic Rabin automaton.
+
+    Args:
+        formula: LTL text (see :func:`planner.ltl.parser.parse`) or a parsed formula.
+        propositions: the alphabet, in letter-bit order; must contain every proposition of
+            the formula and may add others. Default: the formula's propositions, sorted.
+
+    Raises:
+        LTLSyntaxError: if ``formula`` does not parse.
+        AutomatonError: if ``propositions`` has duplicates or misses a proposition.
+    """
+    f = parse(formula) if isinstance(formula, str) else formula
+    props = _alphabet(f, propositions)
+    g = simplify(f)
+    own = tuple(p for p in props if p in g.propositions())
+    if is_cosafe(g):
+        raw = _progression_dfa(g, own, cosafe=True)
+    elif is_safe(g):
+        raw = _progression_dfa(g, own, cosafe=False)
+    else:
+        raw = _safra(g, own)
+    table, initial, pairs, names = reduce_rabin(*raw)
+    table = _expand_alphabet(table, own, props)
+    return RabinAutomaton(
+        props,
+        table,
+        initial,
+        [
+            RabinPair(
+                frozenset(np.flatnonzero(gd).tolist()), frozenset(np.flatnonzero(bd).tolist())
+            )
+            for gd, bd in pairs
+        ],
+        state_names=names,
+    )
