@@ -17,7 +17,9 @@ Entity paths (``K`` is the run index)::
     world/grid                   LineStrips3D  cell borders                       (static)
     world/cells/initial          Boxes3D       initial region (blue)              (static)
     world/cells/<label>          Boxes3D       cells of each label, coloured      (static)
-    world/rewards                Points3D      cells with a reward, labelled "+20" (static)
+    world/rewards                Points3D      cells with a reward, labelled "+20" (static;
+                                               the true rewards, also when unknown to
+                                               the planner)
     world/start                  Points3D      start position                     (static)
     run_K/info                   AnyValues     run_index, seed, scenario          (static)
     run_K/hop/com_arc            LineStrips3D  this hop's CoM arc (T points)
@@ -136,7 +138,7 @@ class RerunRecorder(Observer):
         with contextlib.suppress(FileNotFoundError):
             self._tmp.unlink()
 
-    def _time(self, run: int, hop: int, sim_time: float) -> None:
+    def _time(self, hop: int, sim_time: float) -> None:
         self._rec.set_time("hop", sequence=int(hop))
         self._rec.set_time("sim_time", duration=float(sim_time))
 
@@ -221,7 +223,7 @@ class RerunRecorder(Observer):
         base = _run(k)
         path = event.com_path
         t_end = float(event.com_time[-1]) if event.com_time is not None else event.touchdown_time
-        self._time(k, event.step, event.touchdown_time)
+        self._time(event.step, event.touchdown_time)
         rec.log(f"{base}/hop/com_arc", rr.LineStrips3D([path], colors=[TRAJECTORY_COLOR]))
         rec.log(f"{base}/hop/foot", rr.Points3D([event.foot], radii=[0.06]))
         rec.log(
@@ -295,7 +297,7 @@ class RerunRecorder(Observer):
         """Log the GP maps, the initial state's worst-case probability and stage timings."""
         k, rec = event.run_index, self._rec
         base = _run(k)
-        self._time(k, event.step, self._sim_time.get(k, 0.0))
+        self._time(event.step, self._sim_time.get(k, 0.0))
         for d, axis in enumerate("xy"):
             rec.log(
                 f"{base}/gp/mean_{axis}", rr.Tensor(event.gp_mean[..., d], dim_names=("x", "y"))
@@ -316,7 +318,7 @@ class RerunRecorder(Observer):
         """Log the outcome line and the run's summary record."""
         k, rec = event.run_index, self._rec
         base = _run(k)
-        self._time(k, event.steps, self._sim_time.get(k, 0.0))
+        self._time(event.steps, self._sim_time.get(k, 0.0))
         switch = (
             f"switched at hop {event.switch_step} (p_worst {event.p_switch:.3f})"
             if event.switch_step is not None and event.p_switch is not None

@@ -333,6 +333,13 @@ class Scenario:
             raise ScenarioValueError(f"must be in (0, 1], got {self.p_sat}", key="p_sat")
         self._check_formula()
 
+    def __reduce__(self) -> tuple[Callable[..., Scenario], tuple[dict[str, Any]]]:
+        # The mapping proxies do not pickle; rebuild from plain dicts (for worker processes).
+        kwargs = {f.name: getattr(self, f.name) for f in fields(self)}
+        kwargs["regions"] = dict(self.regions)
+        kwargs["rewards"] = dict(self.rewards)
+        return (_scenario_from_kwargs, (kwargs,))
+
     def _check_region(self, region: Region, key: str) -> None:
         w = self.world
         for k, (x0, y0, x1, y1) in enumerate(region.rects):
@@ -443,6 +450,10 @@ class Scenario:
     def with_runner(self, **changes: Any) -> Scenario:
         """A copy with some runner settings changed (validated)."""
         return replace(self, runner=replace(self.runner, **changes))
+
+
+def _scenario_from_kwargs(kwargs: dict[str, Any]) -> Scenario:
+    return Scenario(**kwargs)
 
 
 # --------------------------------------------------------------------------- loading

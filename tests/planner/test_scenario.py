@@ -252,3 +252,12 @@ def test_formula_syntax_error_and_user_formula():
 def test_labels_must_be_propositions():
     err = _error(BASE.replace("[regions.A]", "[regions.F]"), ScenarioValueError)
     assert err.key == "regions.F" and err.line == _line(BASE, "[regions.A]")
+
+
+def test_scenario_pickles_for_worker_processes():
+    import pickle
+
+    s = load_scenario("c")
+    t = pickle.loads(pickle.dumps(s))
+    assert t == s and t.regions == s.regions
+    np.testing.assert_array_equal(t.reward_grid, s.reward_grid)
