@@ -682,3 +682,28 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     except (OSError, UnicodeDecodeError) as err:
         raise ScenarioError(f"cannot read scenario file: {err}", source=str(path)) from err
     return parse_scenario(text, source=str(path))
+
+
+def ascii_map(scenario: Scenario) -> str:
+    """A text map of the grid, top row = highest y, one character per cell.
+
+    ``@`` start, ``#`` hazard, ``G`` goal, ``s`` initial region, ``.`` unlabelled; other
+    labels show their first character (later labels in scenario order win), and a legend
+    line follows the map.
+    """
+    w = scenario.world
+    grid = np.full((w.nx, w.ny), ".", dtype="<U1")
+    legend = {".": "no label", "s": "initial region"}
+    grid[scenario.initial_mask] = "s"
+    for label in scenario.regions:
+        if label in (scenario.goal, scenario.hazard):
+            continue
+        grid[scenario.region_mask(label)] = label[0]
+        legend.setdefault(label[0], label)
+    grid[scenario.goal_mask] = "G"
+    grid[scenario.hazard_mask] = "#"
+    i, j = divmod(scenario.start_cell, w.ny)
+    grid[i, j] = "@"
+    legend.update({"G": scenario.goal, "#": scenario.hazard, "@": "start"})
+    rows = ["".join(grid[:, jj]) for jj in range(w.ny - 1, -1, -1)]
+    return "\n".join([*rows, "  ".join(f"{k} {v}" for k, v in legend.items())])
