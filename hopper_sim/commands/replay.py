@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,6 +36,9 @@ def viewer_command() -> list[str] | None:
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         return None
     exe = shutil.which("rerun")
+    if exe is None:  # the viewer installed beside this interpreter (venv not on PATH)
+        beside = Path(sys.executable).with_name("rerun")
+        exe = str(beside) if beside.is_file() and os.access(beside, os.X_OK) else None
     return [exe] if exe else None
 
 

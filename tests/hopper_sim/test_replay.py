@@ -56,3 +56,22 @@ def test_replay_script_wrapper(rrd):
         check=True,
     ).stdout
     assert "outcome violation" in out
+
+
+def test_replay_opens_viewer_when_display_exists(rrd, monkeypatch, capsys):
+    monkeypatch.setenv("DISPLAY", ":0")
+    monkeypatch.setattr(replay, "viewer_command", lambda: ["fake-rerun"])
+    calls = []
+    monkeypatch.setattr(replay.subprocess, "call", lambda cmd: calls.append(cmd) or 0)
+    assert main(["replay", str(rrd)]) == 0
+    assert calls == [["fake-rerun", str(rrd)]]
+    assert capsys.readouterr().out == ""
+    assert main(["replay", "--summary", str(rrd)]) == 0
+    assert len(calls) == 1 and "outcome violation" in capsys.readouterr().out
+
+
+def test_viewer_command_needs_a_display(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
+    cmd = replay.viewer_command()
+    assert cmd is None or Path(cmd[0]).name == "rerun"
