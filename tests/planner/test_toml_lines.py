@@ -62,3 +62,26 @@ def test_line_of_falls_back_to_enclosing_key():
 
 def test_scanner_never_raises_on_garbage():
     assert isinstance(key_lines('a = [1, 2\n[b\n"unterminated'), dict)
+
+
+def _paths(value, prefix=""):
+    if isinstance(value, dict):
+        for k, v in value.items():
+            p = f"{prefix}.{k}" if prefix else k
+            yield p, k
+            yield from _paths(v, p)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _paths(v, f"{prefix}[{i}]")
+
+
+def test_every_key_of_the_shipped_scenarios_has_its_line():
+    from planner.scenario import SHIPPED_SCENARIOS, resolve_scenario_path
+
+    for name in SHIPPED_SCENARIOS:
+        text = resolve_scenario_path(name).read_text()
+        lines = key_lines(text)
+        rows = text.splitlines()
+        for path, key in _paths(tomllib.loads(text)):
+            assert path in lines, (name, path)
+            assert key in rows[lines[path] - 1], (name, path, rows[lines[path] - 1])
