@@ -73,10 +73,33 @@ def test_shipped_scenarios_load(name):
     assert s.reward_known == (name in ("a", "b"))
     assert s.runner.runs == (1 if name in ("a", "b") else 10)
     assert s.formula == "!Haz U Goal" and s.p_sat == 0.65
-    # The wall at x = 7 has a gap of 2-3 cells, and the goal is reachable through it.
+    # The wall at x = 7 has a gap of 2-3 cells, and the goal is reachable only through it.
     wall = s.hazard_mask[7]
     assert 2 <= int((~wall).sum()) <= 3
     assert not (s.goal_mask & s.hazard_mask).any()
+    gap = np.zeros_like(s.hazard_mask)
+    gap[7:9][~s.hazard_mask[7:9]] = True
+    assert _goal_reachable(s, s.hazard_mask)
+    assert not _goal_reachable(s, s.hazard_mask | gap)
+
+
+def _goal_reachable(s, blocked):
+    """Breadth-first search over the 8 hop actions (1 or 2 cells N/E/S/W), never landing
+    in a blocked cell."""
+    nx, ny = blocked.shape
+    seen = np.zeros_like(blocked)
+    frontier = [divmod(s.start_cell, ny)]
+    seen[frontier[0]] = True
+    while frontier:
+        nxt = []
+        for i, j in frontier:
+            for di, dj in [(0, 1), (0, 2), (1, 0), (2, 0), (0, -1), (0, -2), (-1, 0), (-2, 0)]:
+                a, b = i + di, j + dj
+                if 0 <= a < nx and 0 <= b < ny and not blocked[a, b] and not seen[a, b]:
+                    seen[a, b] = True
+                    nxt.append((a, b))
+        frontier = nxt
+    return bool((seen & s.goal_mask).any())
 
 
 def test_shipped_layouts_place_a_and_b():
