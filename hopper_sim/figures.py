@@ -3,7 +3,8 @@
 A figure shows the grid world seen from above with its coloured regions (initial region blue,
 goal green, hazards red, ``A``/``B`` purple with their letters, weak hazards pink, other labels
 from a fixed cycle), the CoM path of every hop projected on the ground, the landing points
-(orange in exploration, dark red in goal reaching), the start, and a title with the outcome,
+(orange in exploration, dark red in goal reaching, crossed where the backup switch replaced
+the action), the start (a star), and a title with the outcome,
 the number of hops and the reward. Coordinates are world metres.
 
 Rendering uses matplotlib's Agg canvas directly (no pyplot state, no display needed). Files
@@ -116,6 +117,11 @@ def render_run_figure(
             ax.scatter(
                 landings[mask, 0], landings[mask, 1], s=14, color=color, zorder=3, linewidths=0
             )
+        backup = np.array([h.backup for h in hops])
+        if backup.any():
+            ax.scatter(
+                landings[backup, 0], landings[backup, 1], s=40, marker="x", color="black", zorder=4
+            )
     ax.scatter(*scenario.start, s=60, marker="*", color="white", edgecolors="black", zorder=4)
     ax.set_xlim(0, w.width)
     ax.set_ylim(0, w.height)
@@ -128,6 +134,7 @@ def render_run_figure(
             Line2D(
                 [], [], marker="o", linestyle="", color=GOAL_REACHING_COLOR, label="goal reaching"
             ),
+            Line2D([], [], marker="x", linestyle="", color="black", label="backup action"),
         ],
         loc="upper right",
         fontsize=7,

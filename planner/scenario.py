@@ -688,18 +688,22 @@ def ascii_map(scenario: Scenario) -> str:
     """A text map of the grid, top row = highest y, one character per cell.
 
     ``@`` start, ``#`` hazard, ``G`` goal, ``s`` initial region, ``.`` unlabelled; other
-    labels show their first character (later labels in scenario order win), and a legend
-    line follows the map.
+    labels show a character of their own (their first unused letter; later labels in
+    scenario order win where labels overlap), and a legend line follows the map.
     """
     w = scenario.world
     grid = np.full((w.nx, w.ny), ".", dtype="<U1")
     legend = {".": "no label", "s": "initial region"}
+    used = {".", "s", "G", "#", "@"}
     grid[scenario.initial_mask] = "s"
+    pool = "abcdefghijklmnopqrstuvwxyzABCDEFHIJKLMNOPQRSTUVWXYZ0123456789"
     for label in scenario.regions:
         if label in (scenario.goal, scenario.hazard):
             continue
-        grid[scenario.region_mask(label)] = label[0]
-        legend.setdefault(label[0], label)
+        char = next((c for c in label + label.lower() + pool if c not in used), "?")
+        used.add(char)
+        grid[scenario.region_mask(label)] = char
+        legend[char] = label
     grid[scenario.goal_mask] = "G"
     grid[scenario.hazard_mask] = "#"
     i, j = divmod(scenario.start_cell, w.ny)

@@ -257,3 +257,17 @@ def test_scenario_pickles_for_worker_processes():
     t = pickle.loads(pickle.dumps(s))
     assert t == s and t.regions == s.regions
     np.testing.assert_array_equal(t.reward_grid, s.reward_grid)
+
+
+def test_example_user_scenario_loads():
+    from planner.scenario import ascii_map
+
+    root = Path(__file__).resolve().parents[2]
+    s = load_scenario(root / "examples" / "scenarios" / "corridor.toml")
+    assert (s.world.nx, s.world.ny, s.world.cell) == (24, 12, 0.5)
+    assert set(s.labels) == {"Goal", "Haz", "charger", "coin"}
+    assert s.reward_grid.sum() == pytest.approx(9.0)
+    text = ascii_map(s)
+    assert "c charger" in text and "o coin" in text
+    rows = text.splitlines()[:12]
+    assert rows[12 - 1 - 8][12] == "c" and rows[12 - 1 - 9][16] == "o"
