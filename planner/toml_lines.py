@@ -7,7 +7,8 @@ in the parsed data can name its line. Keys are written as dotted paths with arra
 - ``name`` for a top-level key, ``world.size`` for a key in ``[world]`` (or written
   ``world.size = ...`` at top level, or inside an inline table ``world = {size = ...}``);
 - ``regions.Goal`` for a table header ``[regions.Goal]``;
-- ``runs[2]`` for the third ``[[runs]]`` header, ``runs[2].seed`` for a key below it;
+- ``runs[2]`` for the third ``[[runs]]`` header, ``runs[2].seed`` for a key below it (and
+  ``runs[2].sub`` for a later ``[runs.sub]`` header, which belongs to that entry);
 - ``regions.Goal.rects[1]`` for the second element of an array, wherever it starts.
 
 The scanner is meant for text that ``tomllib`` has already accepted; on text it cannot follow
@@ -166,17 +167,31 @@ class _Scanner:
 
     def document(self) -> None:
         table = ""
-        counts: dict[str, int] = {}
+        counts: dict[str, int] = {}  # resolved array-of-tables path -> number of entries
+
+        def resolve(parts: list[str], upto: int) -> str:
+            # A header inside an array of tables refers to its last entry: a[1].b
+            path = ""
+            for part in parts[:upto]:
+                path = f"{path}.{part}" if path else part
+                if path in counts:
+                    path = f"{path}[{counts[path] - 1}]"
+            return path
+
         while True:
             self.skip_blank(newlines=True)
             if self.pos >= len(self.text):
                 return
             if self.peek(2) == "[[":
                 self.advance(2)
-                name = ".".join(self.key())
+                parts = self.key()
                 self.skip_blank(newlines=False)
                 if self.peek(2) != "]]":
                     raise _Stop
+                for k in range(1, len(parts)):
+                    self.record(resolve(parts, k))
+                parent = resolve(parts, len(parts) - 1)
+                name = f"{parent}.{parts[-1]}" if parent else parts[-1]
                 self.record(name)
                 index = counts.get(name, 0)
                 counts[name] = index + 1
@@ -189,8 +204,8 @@ class _Scanner:
                 if self.peek() != "]":
                     raise _Stop
                 for k in range(1, len(parts) + 1):
-                    self.record(".".join(parts[:k]))
-                table = ".".join(parts)
+                    self.record(resolve(parts, k))
+                table = resolve(parts, len(parts))
                 self.advance()
             else:
                 self.keyval(table)

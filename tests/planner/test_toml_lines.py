@@ -85,3 +85,69 @@ def test_every_key_of_the_shipped_scenarios_has_its_line():
         for path, key in _paths(tomllib.loads(text)):
             assert path in lines, (name, path)
             assert key in rows[lines[path] - 1], (name, path, rows[lines[path] - 1])
+
+
+# --- property: generated documents -----------------------------------------------------
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_keys = st.one_of(
+    st.from_regex(r"[a-z][a-z0-9_-]{0,5}", fullmatch=True),
+    st.from_regex(r"[a-z .#=\[\]]{1,6}", fullmatch=True).map(lambda k: f'"{k}"'),
+)
+_scalars = st.one_of(
+    st.integers(-100, 100).map(str),
+    st.floats(-10, 10, allow_nan=False).map(repr),
+    st.booleans().map(lambda b: "true" if b else "false"),
+    st.from_regex(r"[a-z \[\]=#,]{0,8}", fullmatch=True).map(lambda s: f'"{s}"'),
+    st.from_regex(r"[a-z \[\]=#,]{0,8}", fullmatch=True).map(lambda s: f"'{s}'"),
+)
+
+
+@st.composite
+def _value(draw, depth=0):
+    if depth >= 2 or draw(st.booleans()):
+        return draw(_scalars)
+    items = draw(st.lists(_value(depth + 1), max_size=3))
+    sep = ",\n  # note\n  " if draw(st.booleans()) else ", "
+    return "[" + sep.join(items) + "]"
+
+
+@st.composite
+def _document(draw):
+    lines: list[str] = []
+    for _ in range(draw(st.integers(0, 3))):
+        lines.append(f"{draw(_keys)} = {draw(_value())}  # c")
+    for _ in range(draw(st.integers(0, 3))):
+        header = ".".join(draw(st.lists(_keys, min_size=1, max_size=2)))
+        lines.append(f"[{header}]" if draw(st.booleans()) else f"[[{header}]]")
+        for _ in range(draw(st.integers(0, 3))):
+            lines.append(f"{draw(_keys)} = {draw(_value())}")
+    return "\n".join(lines) + "\n"
+
+
+@settings(max_examples=150, deadline=None)
+@given(_document())
+def test_generated_documents_map_every_key(text):
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return  # duplicate keys or tables: not a document to locate keys in
+    lines = key_lines(text)
+    rows = text.splitlines()
+    for path, key in _paths(data):
+        assert path in lines, (path, text)
+        assert key in rows[lines[path] - 1], (path, text)
+
+
+def test_headers_inside_arrays_of_tables():
+    text = "[[a]]\nx = 1\n[a.b]\ny = 2\n[[a]]\n[[a.c]]\nz = 3\n[[a.c]]\nz = 4\n"
+    data = tomllib.loads(text)
+    assert data["a"][1]["c"][1]["z"] == 4
+    lines = key_lines(text)
+    assert lines["a[0].b.y"] == 4
+    assert lines["a[1]"] == 5
+    assert lines["a[1].c[0].z"] == 7
+    assert lines["a[1].c[1].z"] == 9
+    for path, _ in _paths(data):
+        assert path in lines
