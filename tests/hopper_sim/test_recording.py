@@ -107,3 +107,34 @@ def test_bad_files_raise_recording_error(tmp_path: Path, recorded):
         summarize_recording(truncated)
     with pytest.raises(RecordingError, match="folder"):
         RerunRecorder(tmp_path / "no" / "such.rrd")
+
+
+def _column_rows(path: Path, entity: str, column: str) -> list:
+    from rerun.chunk import RrdReader
+
+    rows = []
+    for chunk in RrdReader(path).stream().to_chunks():
+        if str(chunk.entity_path) == f"/{entity}":
+            batch = chunk.to_record_batch()
+            hops = batch.column("hop").to_pylist()
+            rows += zip(hops, batch.column(column).to_pylist(), strict=True)
+    return [v for _, v in sorted(rows, key=lambda r: r[0])]
+
+
+@pytest.mark.parametrize("flush_every", [1, 2, 100])
+def test_buffered_hops_are_written_in_order(tmp_path: Path, flush_every: int):
+    path = tmp_path / "r.rrd"
+    scenario = load_scenario("a")
+    events = run_events(scenario, 0, 5)
+    with RerunRecorder(path, flush_every=flush_every) as rec:
+        feed(rec, events)
+    (run,) = summarize_recording(path)["runs"]
+    assert run["hops"] == 5 and run["outcome"] == "success"
+    strips = _column_rows(path, "run_0/trajectory", "LineStrips3D:strips")
+    assert [len(s[0]) for s in strips] == [2, 3, 4, 5, 6]  # start + landings so far
+    assert strips[-1][0][-1][:2] == pytest.approx(events[-2].landing.tolist())
+    steps = _column_rows(path, "run_0/hops", "step")
+    assert [s[0] for s in steps] == [0, 1, 2, 3, 4]
+    rewards = _column_rows(path, "run_0/plots/total_reward", "Scalars:scalars")
+    hops = events[2:-1]
+    assert [r[0] for r in rewards] == pytest.approx([h.total_reward for h in hops])
