@@ -39,6 +39,7 @@ Entity paths (``K`` is the run index)::
     run_K/plots/total_reward     Scalars       reward collected so far
     run_K/plots/phase            Scalars       0 exploration, 1 goal reaching
     run_K/plots/rl_action        Scalars       1 if the RL policy chose the action
+    run_K/plots/backup           Scalars       1 if the backup switch replaced the action
     run_K/plots/p_worst_initial  Scalars       at each synthesis
     run_K/gp/mean_x, mean_y      Tensor        GP posterior mean of the landing error, (Gx, Gy)
     run_K/gp/std_x, std_y        Tensor        GP posterior std of the landing error, (Gx, Gy)
@@ -331,6 +332,7 @@ class RerunRecorder(Observer):
             "total_reward": [h.total_reward for h in hops],
             "phase": [1.0 if h.phase == "goal_reaching" else 0.0 for h in hops],
             "rl_action": [1.0 if h.source == "RL" else 0.0 for h in hops],
+            "backup": [1.0 if h.backup else 0.0 for h in hops],
         }
         for name, values in plots.items():
             send(f"{base}/plots/{name}", index, rr.Scalars.columns(scalars=np.asarray(values)))

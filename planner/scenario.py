@@ -249,7 +249,8 @@ class Scenario:
         formula: LTL formula over the labels.
         rewards: label -> reward collected on each landing in a cell with that label.
         hazard: the hazard label.
-        goal: the goal label; its cells may not carry the hazard label.
+        goal: the goal label (drawn green); its cells may not carry the hazard label. A
+            scenario whose formula has no goal may leave it without a region.
         p_sat: worst-case satisfaction probability that starts goal reaching [P_sat].
         reward_known: whether the planner knows ``rewards`` (else it learns them).
         runner: runner settings.

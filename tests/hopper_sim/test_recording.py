@@ -20,6 +20,7 @@ EXPECTED_RUN_ENTITIES = [
     "plots/total_reward",
     "plots/phase",
     "plots/rl_action",
+    "plots/backup",
     "plots/p_worst_initial",
     "gp/mean_x",
     "gp/mean_y",
