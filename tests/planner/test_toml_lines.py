@@ -1,4 +1,9 @@
-import tomllib
+import sys
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 from planner.toml_lines import key_lines, line_of
 
