@@ -25,7 +25,7 @@ import numpy as np
 from hopper_sim import slip
 from hopper_sim import thrust as thrust_law
 from hopper_sim.model import HopperModel
-from hopper_sim.terrain import TerrainField
+from hopper_sim.terrain import ForceField
 
 #: Status names; index = the integer code used by the batched path.
 STATUS_NAMES: tuple[str, ...] = ("ok", "no_touchdown", "no_liftoff", "ground", "unstable")
@@ -329,7 +329,7 @@ def simulate_hop(
     alpha: float,
     beta: float,
     *,
-    terrain: TerrainField | None = None,
+    terrain: ForceField | None = None,
     noise: np.ndarray | None = None,
     thrust: bool = False,
     nominal_energy: float | None = None,

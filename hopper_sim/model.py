@@ -21,7 +21,7 @@ from hopper_sim import constants as C
 # dm_control picks an OpenGL backend at import; the simulation never renders, so unless the
 # caller chose a backend, import it without one (this also avoids a GLFW warning headless).
 os.environ.setdefault("MUJOCO_GL", "disable")
-from dm_control import mjcf  # noqa: E402
+from dm_control import mjcf
 
 
 class ModelError(ValueError):
@@ -124,7 +124,10 @@ class HopperModel:
         self.leg_tendon = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, C.TENDON_LEG)
         self.thrust_actuator = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, C.ACTUATOR_THRUST)
         self.qpos_adr = np.array(
-            [m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in C.COM_JOINTS]
+            [
+                m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
+                for j in C.COM_JOINTS
+            ]
         )
         self.dof_adr = np.array(
             [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in C.COM_JOINTS]

@@ -18,6 +18,7 @@ constant over a stance. Default A and ell come from the scene's custom numerics
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -93,3 +94,9 @@ class TerrainField:
         arg = np.einsum("nk,adk->and", pts, self.omega) + self.phase[:, None, :]
         out = scale * np.einsum("and,ad->na", np.cos(arg), self.weight)
         return out[0] if single else out
+
+
+class ForceField(Protocol):
+    """Anything with ``force(xy (N, 2)) -> (N, 2)`` [N]: a horizontal force field."""
+
+    def force(self, xy: np.ndarray) -> np.ndarray: ...
