@@ -27,7 +27,7 @@ from hopper_sim.model import SlipParams
 
 T = TypeVar("T")
 
-DEFAULT_MAX_RUNS = 4
+DEFAULT_MAX_RUNS = 8
 DEFAULT_RTOL = 1e-7
 
 
