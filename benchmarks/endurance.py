@@ -36,7 +36,7 @@ from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.terrain import TerrainField
 
-V_H, V_Z = 2.0, -2.4  # nominal interstitial velocity [m/s]: 1.41 m hops, apex 1.29 m
+V_H, V_Z = 2.0, -3.0  # nominal interstitial velocity [m/s]
 SIDE = 8.0  # square route side [m]
 SWITCH = 1.2  # switch to the next corner within this distance [m]
 K_BETA, BETA_MAX = 0.6, 0.3
