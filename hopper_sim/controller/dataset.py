@@ -4,7 +4,7 @@ through a batched simulator, kept with their failures, saved as a compressed ``.
 Each sample starts at the origin with its horizontal velocity along +x (heading ``psi = 0``),
 so the world frame of the simulator *is* the heading frame of :mod:`hop_model`:
 
-    inputs  (N, 4): s ~ U[speed], v_z ~ U[vz], alpha ~ U[alpha], beta ~ U[beta]
+    inputs  (N, 4): (s, v_z, alpha, beta), see :class:`Sampling`
     outputs (N, 5): (dx, dy, v_x', v_y', v_z'), NaN where the hop failed
     ok      (N,)  : True where the hop reached the next interstitial state
     status  (N,)  : the simulator's status per hop (text)
@@ -97,12 +97,55 @@ class HopDataset:
         return InputRanges.from_array(np.asarray(self.metadata["ranges"]))
 
 
-def sample_inputs(rng: np.random.Generator, n: int, ranges: InputRanges) -> np.ndarray:
-    """``(n, 4)`` inputs drawn uniformly from the box ``ranges``."""
+@dataclass(frozen=True)
+class Sampling:
+    """How the interstitial velocities are drawn (alpha and beta are always uniform on the box).
+
+    A fraction ``1 - shell_fraction`` is uniform on the whole box ``ranges``. The rest lies
+    near the *operating shell* of the navigation: with the stance thrust regulating every hop's
+    energy to the nominal one, each interstitial state has total speed ``|v| = V_nom``; there
+    ``V ~ U[V_nom (1 - shell_width), V_nom (1 + shell_width)]``, descent angle
+    ``gamma ~ U[0, gamma_max]``, ``s = V cos gamma``, ``v_z = -V sin gamma`` (clipped to the
+    box). ``shell_speed=None`` disables the shell (all samples uniform).
+    """
+
+    shell_speed: float | None = None
+    shell_fraction: float = 0.8
+    shell_width: float = 0.03
+    gamma_max: float = 1.35
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.shell_fraction <= 1.0:
+            raise InputShapeError(f"shell_fraction must lie in [0, 1], got {self.shell_fraction}")
+        if self.shell_speed is not None and not self.shell_speed > 0:
+            raise InputShapeError(f"shell_speed must be positive, got {self.shell_speed}")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "shell_speed": self.shell_speed,
+            "shell_fraction": self.shell_fraction,
+            "shell_width": self.shell_width,
+            "gamma_max": self.gamma_max,
+        }
+
+
+def sample_inputs(
+    rng: np.random.Generator, n: int, ranges: InputRanges, sampling: Sampling | None = None
+) -> np.ndarray:
+    """``(n, 4)`` inputs drawn as :class:`Sampling` says (default: uniform on ``ranges``)."""
     if n <= 0:
         raise InputShapeError(f"number of samples must be positive, got {n}")
     box = ranges.as_array()
-    return rng.uniform(box[:, 0], box[:, 1], size=(n, N_INPUTS))
+    x = rng.uniform(box[:, 0], box[:, 1], size=(n, N_INPUTS))
+    sampling = sampling or Sampling()
+    if sampling.shell_speed is not None:
+        shell = rng.random(n) < sampling.shell_fraction
+        m = int(shell.sum())
+        v = sampling.shell_speed * (1 + sampling.shell_width * rng.uniform(-1, 1, m))
+        gamma = rng.uniform(0.0, sampling.gamma_max, m)
+        x[shell, 0] = np.clip(v * np.cos(gamma), *box[0])
+        x[shell, 1] = np.clip(-v * np.sin(gamma), *box[1])
+    return x
 
 
 def generate_dataset(
@@ -111,16 +154,19 @@ def generate_dataset(
     *,
     seed: int,
     ranges: InputRanges | None = None,
+    sampling: Sampling | None = None,
     chunk: int = 5000,
     metadata: Mapping[str, Any] | None = None,
     progress: Progress | None = None,
 ) -> HopDataset:
-    """Sample ``n`` hops with ``numpy.random.default_rng(seed)`` and run them through
-    ``hop_fn`` in chunks of ``chunk`` (``progress`` is called after each chunk)."""
+    """Sample ``n`` hops with ``numpy.random.default_rng(seed)`` (see :class:`Sampling`) and
+    run them through ``hop_fn`` in chunks of ``chunk`` (``progress`` is called after each
+    chunk with its size)."""
     ranges = ranges or InputRanges()
+    sampling = sampling or Sampling()
     if chunk <= 0:
         raise InputShapeError(f"chunk must be positive, got {chunk}")
-    x = sample_inputs(np.random.default_rng(seed), n, ranges)
+    x = sample_inputs(np.random.default_rng(seed), n, ranges, sampling)
     outputs = np.full((n, N_OUTPUTS), np.nan)
     ok = np.zeros(n, dtype=bool)
     status = np.empty(n, dtype=object)
@@ -142,6 +188,7 @@ def generate_dataset(
         "seed": int(seed),
         "count": int(n),
         "ranges": ranges.as_array().tolist(),
+        "sampling": sampling.as_dict(),
         **dict(metadata or {}),
     }
     return HopDataset(x, outputs, ok, status.astype(str), meta)

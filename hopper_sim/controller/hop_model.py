@@ -40,10 +40,14 @@ N_OUTPUTS = len(OUTPUT_NAMES)
 @dataclass(frozen=True)
 class InputRanges:
     """Box of the training inputs: interstitial horizontal speed [m/s], vertical velocity
-    [m/s], leg elevation alpha [rad] and azimuth beta [rad] (relative to the heading)."""
+    [m/s], leg elevation alpha [rad] and azimuth beta [rad] (relative to the heading).
 
-    speed: tuple[float, float] = (1.0, 8.0)
-    vz: tuple[float, float] = (-3.0, 0.0)
+    The default horizontal speeds [0.5, 8] m/s cover the issue's [1, 8] m/s and the steep
+    descents (|v| = 3.5 m/s, descent angle up to 1.35 rad) that turning hops produce.
+    """
+
+    speed: tuple[float, float] = (0.5, 8.0)
+    vz: tuple[float, float] = (-3.5, 0.0)
     alpha: tuple[float, float] = (float(np.pi / 4), float(np.pi / 2))
     beta: tuple[float, float] = (float(-np.pi / 2), float(np.pi / 2))
 
