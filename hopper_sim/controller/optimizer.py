@@ -131,6 +131,19 @@ class LegAngleOptimizer:
         feas = torch.clamp(w.margin - logit, min=0)
         return w.c1 * d_err + w.c2 * v_err + w.c3 * bound + w.c4 * feas
 
+    def cost(
+        self,
+        speed: float,
+        vz: float,
+        angles: torch.Tensor,
+        target: torch.Tensor,
+        v_des: torch.Tensor,
+    ) -> torch.Tensor:
+        """The cost (B,) of angles (B, 2) for targets (B, 2) and desired velocities (B, 3)
+        (heading frame); differentiable in ``angles``."""
+        y, logit = self.net(self._inputs(speed, vz, angles))
+        return self._cost(y, logit, angles, target, v_des)
+
     def _inputs(self, speed: float, vz: float, angles: torch.Tensor) -> torch.Tensor:
         sv = torch.tensor([speed, vz], dtype=torch.float32).expand(*angles.shape[:-1], 2)
         return torch.cat([sv, angles], dim=-1)
