@@ -18,11 +18,14 @@ points by k-means (scikit-learn, seeded) on the departure positions and starts t
 from the previous hyperparameters (warm start); :meth:`LandingErrorGP.reset` forgets both.
 Fitting runs ``steps`` Adam steps (learning rate ``learning_rate``) on the negative bound plus
 the negative log prior, divided by the number of data; inducing points are optimised too.
+Fitting and prediction run with ``num_threads`` torch threads (default 1: the matrices are
+small, and extra threads only contend on a shared machine); the global setting is restored.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import gpytorch
@@ -48,11 +51,14 @@ class FitSettings:
     lengthscale: float = 2.0
     noise_std: float = 0.1
     jitter: float = 1e-6
+    num_threads: int | None = 1
 
     def __post_init__(self) -> None:
         for name in ("num_inducing", "steps"):
             if int(getattr(self, name)) < (1 if name == "num_inducing" else 0):
                 raise GPDataError(f"FitSettings.{name} out of range: {getattr(self, name)}")
+        if self.num_threads is not None and int(self.num_threads) < 1:
+            raise GPDataError(f"FitSettings.num_threads must be >= 1, got {self.num_threads}")
         for name in ("learning_rate", "prior_std", "lengthscale", "noise_std", "jitter"):
             value = float(getattr(self, name))
             if not np.isfinite(value) or value <= 0.0:
@@ -69,6 +75,18 @@ class FitReport:
     lengthscale: np.ndarray
     outputscale: np.ndarray
     noise: np.ndarray
+
+
+@contextmanager
+def _torch_threads(n: int | None) -> Iterator[None]:
+    """Run with ``n`` intra-op torch threads (restored afterwards); ``None``: leave as is."""
+    old = torch.get_num_threads()
+    if n is not None:
+        torch.set_num_threads(int(n))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
 
 
 def _validate(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -153,6 +171,12 @@ class LandingErrorGP:
         With ``N = 0`` the model returns to its prior (hyperparameters kept).
         """
         pos, err = _validate(positions, errors)
+        with _torch_threads(self.settings.num_threads):
+            return self._fit(pos, err, on_step)
+
+    def _fit(
+        self, pos: np.ndarray, err: np.ndarray, on_step: Callable[[int, float], None] | None
+    ) -> FitReport:
         if pos.shape[0] == 0:
             self.num_data = 0
             self._posterior = self.model.prior()
@@ -194,7 +218,8 @@ class LandingErrorGP:
             raise GPDataError(f"points must have shape (M, 2), got {pts.shape}")
         if not np.isfinite(pts).all():
             raise GPDataError("points has non-finite values")
-        return self._posterior.predict(pts)
+        with _torch_threads(self.settings.num_threads):
+            return self._posterior.predict(pts)
 
     def variation(self, half_width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """See :meth:`planner.gp.sgpr.SparsePosterior.variation`."""
