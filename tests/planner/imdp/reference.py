@@ -12,17 +12,19 @@ def random_imdp(
     rng: np.random.Generator,
     n_states: int = 25,
     n_actions: int = 3,
-    max_succ: int = 5,
+    max_succ: int = 4,
     zero_lower: bool = True,
     labels: bool = True,
 ) -> IMDP:
     """A random IMDP whose rows bracket 1 (an interval around a random distribution)."""
-    s, a, t, lo, up = [], [], [], [], []
-    for q in range(n_states):
+    s, a, t, lo, up = [0], [0], [0], [1.0], [1.0]  # state 0: an absorbing sink
+    for q in range(1, n_states):
         acts = rng.choice(n_actions, size=rng.integers(1, n_actions + 1), replace=False)
         for act in acts:
             k = int(rng.integers(1, max_succ + 1))
             succ = rng.choice(n_states, size=k, replace=False)
+            if rng.random() < 0.3 and 0 not in succ:
+                succ[0] = 0
             p = rng.dirichlet(np.ones(k))
             lower = p * rng.uniform(0.3, 1.0, size=k)
             if zero_lower:
@@ -36,7 +38,8 @@ def random_imdp(
     lab = None
     if labels:
         kind = rng.random(n_states)
-        lab = [("goal",) if x < 0.1 else ("bad",) if x < 0.2 else () for x in kind]
+        lab = [("goal",) if x < 0.1 else ("bad",) if x < 0.3 else () for x in kind]
+        lab[0] = ()
     return IMDP(
         n_states, s, a, t, lo, up, n_actions=n_actions, labels=lab, propositions=("bad", "goal")
     )
