@@ -207,14 +207,21 @@ class ProductIMDP:
         the states left without actions, until stable (Jiang et al. 2023, Alg. 1)."""
         return graph.prune(self.model, self.failure_states())
 
-    def satisfying(self, threshold: float, values: np.ndarray | None = None) -> SubModel:
-        """The satisfying sub-model: keep the states whose worst-case satisfaction
-        probability exceeds ``threshold`` (P_sat) and prune as :meth:`nonviolating` does.
+    def satisfying(self, threshold: float, solution: Solution | None = None) -> SubModel:
+        """The satisfying sub-model for ``P_sat = threshold``.
 
-        ``values`` defaults to :meth:`satisfaction`'s values.
+        Keeps the states whose worst-case satisfaction probability ``V`` exceeds the
+        threshold, and there the actions whose worst-case value ``Q`` (the minimising
+        adversary's expectation of ``V`` over the action's intervals) exceeds it too: any
+        allowed action keeps the guaranteed satisfaction probability above ``P_sat`` when
+        the optimal strategy is followed afterwards. Every kept state keeps its optimal
+        action (``Q = V``). ``solution`` defaults to :meth:`satisfaction`.
         """
-        v = self.satisfaction().values if values is None else np.asarray(values)
-        return graph.prune(self.model, ~(v > threshold) | self.failure_states())
+        sol = self.satisfaction() if solution is None else solution
+        keep = sol.values > threshold
+        rows = keep[self.model.row_state] & (np.nan_to_num(sol.q_values, nan=-1.0) > threshold)
+        states = keep & graph.has_row(self.model, rows)
+        return SubModel(states, rows, graph.actions_from_rows(self.model, rows))
 
     def goal_strategy(self, allowed: np.ndarray | None = None) -> np.ndarray:
         """Action per product state that maximises the worst-case satisfaction probability:
