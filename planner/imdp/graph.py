@@ -32,14 +32,22 @@ class EndComponent:
     Attributes:
         states: sorted state indices of ``T``.
         rows: sorted row indices of ``Act`` (every row of ``model.row_state[rows]`` is in T).
+        pair: the Rabin pair an accepting component satisfies (-1: not applicable).
     """
 
     states: np.ndarray
     rows: np.ndarray
+    pair: int = -1
+    """For accepting components: the index of the Rabin pair they satisfy."""
 
     def state_mask(self, n_states: int) -> np.ndarray:
         mask = np.zeros(n_states, dtype=bool)
         mask[self.states] = True
+        return mask
+
+    def row_mask(self, n_rows: int) -> np.ndarray:
+        mask = np.zeros(n_rows, dtype=bool)
+        mask[self.rows] = True
         return mask
 
     def __len__(self) -> int:

@@ -313,7 +313,8 @@ def _strategy(
     qq = np.where(rows, q, -np.inf if maximize else np.inf)
     best = (np.maximum if maximize else np.minimum).reduceat(qq, m.state_ptr[:-1])
     slack = max(10 * tol, 1e-12)
-    opt = rows & (np.abs(qq - best[m.row_state]) <= slack)
+    with np.errstate(invalid="ignore"):
+        opt = rows & (np.abs(qq - best[m.row_state]) <= slack)
     first = np.full(n, -1, dtype=np.int64)
     opt_idx = np.flatnonzero(opt)
     st = m.row_state[opt_idx]
