@@ -1,10 +1,11 @@
 """Per-cell landing-error bounds and transition intervals of the grid abstraction.
 
-Conventions (``DESIGN.md``): ``nx`` x ``ny`` cells of side ``cell`` metres, origin at the
-lower-left corner; cell ``(i, j)`` covers ``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)``, flat
-index ``i * ny + j``; the absorbing ``out`` state has index ``nx * ny``. Actions, index 0..7:
-``N1, N2, E1, E2, S1, S2, W1, W2`` (N = +y, E = +x, one or two cells); an action whose target
-cell is outside the world is not enabled and gets no rows.
+Conventions (``DESIGN.md``, :class:`planner.imdp.grid.GridWorld`): ``nx`` x ``ny`` cells of
+side ``cell`` metres, origin at the lower-left corner; cell ``(i, j)`` covers
+``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)``, flat index ``i * ny + j``; the absorbing
+``out`` state has index ``nx * ny``. Actions, index 0..7: ``N1, N2, E1, E2, S1, S2, W1, W2``
+(N = +y, E = +x, one or two cells); an action whose target cell is outside the world is not
+enabled and gets no rows.
 
 Landing model: departing from ``x`` in cell ``c`` with action ``a`` (target cell centre
 ``t``), the robot lands at ``t + e(x) + nu``, ``e`` the unknown mean landing error and ``nu``
@@ -52,14 +53,7 @@ from scipy.special import ndtr, ndtri
 
 from planner.errors import IntervalError
 from planner.gp.protocol import ErrorPredictor
-
-ACTION_NAMES: tuple[str, ...] = ("N1", "N2", "E1", "E2", "S1", "S2", "W1", "W2")
-"""Action names in index order."""
-
-ACTION_OFFSETS: np.ndarray = np.array(
-    [(0, 1), (0, 2), (1, 0), (2, 0), (0, -1), (0, -2), (-1, 0), (-2, 0)], dtype=np.int64
-)
-"""``(di, dj)`` cell offset of each action's target, shape ``(8, 2)``."""
+from planner.imdp.grid import GridWorld
 
 
 @dataclass(frozen=True)
@@ -99,13 +93,6 @@ def confidence_beta(delta: float, num_points: int) -> float:
     return float(ndtri(1.0 - delta / (2.0 * num_points)))
 
 
-def _check_grid(nx: int, ny: int, cell: float) -> None:
-    if int(nx) < 1 or int(ny) < 1:
-        raise IntervalError(f"grid must have at least one cell per axis, got nx={nx}, ny={ny}")
-    if not np.isfinite(cell) or cell <= 0.0:
-        raise IntervalError(f"cell size must be positive and finite, got {cell}")
-
-
 @dataclass(frozen=True)
 class CellErrorBounds:
     """Per-cell bounds of the mean landing error, metres, each ``(nx * ny, 2)`` (x, y)."""
@@ -117,9 +104,9 @@ class CellErrorBounds:
     samples_per_axis: int
 
 
-def cell_sample_points(nx: int, ny: int, cell: float, samples_per_axis: int) -> np.ndarray:
-    """Sub-square centres of every cell, ``(nx * ny, K * K, 2)`` metres, flat cell order."""
-    _check_grid(nx, ny, cell)
+def cell_sample_points(grid: GridWorld, samples_per_axis: int) -> np.ndarray:
+    """Sub-square centres of every cell, ``(n_cells, K * K, 2)`` metres, flat cell order."""
+    nx, ny, cell = grid.nx, grid.ny, grid.cell
     k = int(samples_per_axis)
     if k < 1:
         raise IntervalError(f"samples_per_axis must be >= 1, got {samples_per_axis}")
@@ -132,9 +119,7 @@ def cell_sample_points(nx: int, ny: int, cell: float, samples_per_axis: int) -> 
 
 def cell_error_bounds(
     predictor: ErrorPredictor,
-    nx: int,
-    ny: int,
-    cell: float,
+    grid: GridWorld,
     *,
     samples_per_axis: int = 5,
     delta: float = 0.01,
@@ -144,7 +129,7 @@ def cell_error_bounds(
 
     ``beta`` overrides the union-bound multiplier computed from ``delta``.
     """
-    pts = cell_sample_points(nx, ny, cell, samples_per_axis)
+    pts = cell_sample_points(grid, samples_per_axis)
     n_cells, n_sub = pts.shape[:2]
     if beta is None:
         beta = confidence_beta(delta, 2 * n_cells * n_sub)
@@ -153,7 +138,7 @@ def cell_error_bounds(
     mean, std = predictor.predict(pts.reshape(-1, 2))
     mean = np.asarray(mean, dtype=np.float64).reshape(n_cells, n_sub, 2)
     std = np.asarray(std, dtype=np.float64).reshape(n_cells, n_sub, 2)
-    dmean, dstd = predictor.variation(np.full(2, cell / (2 * samples_per_axis)))
+    dmean, dstd = predictor.variation(np.full(2, grid.cell / (2 * samples_per_axis)))
     s_max = std.max(axis=1) + np.asarray(dstd)
     lower = mean.min(axis=1) - np.asarray(dmean) - beta * s_max
     upper = mean.max(axis=1) + np.asarray(dmean) + beta * s_max
@@ -162,7 +147,11 @@ def cell_error_bounds(
 
 @dataclass(frozen=True)
 class TransitionIntervals:
-    """COO transition intervals: row ``k`` bounds ``P(successor[k] | state[k], action[k])``."""
+    """COO transition intervals: row ``k`` bounds ``P(successor[k] | state[k], action[k])``.
+
+    Feed them to :meth:`planner.imdp.grid.GridWorld.imdp_from_intervals` (which adds the
+    self-loop of ``out``) with :meth:`coo`.
+    """
 
     state: np.ndarray
     action: np.ndarray
@@ -170,6 +159,10 @@ class TransitionIntervals:
     lower: np.ndarray
     upper: np.ndarray
     num_states: int
+
+    def coo(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(state, action, successor, lower, upper)``."""
+        return self.state, self.action, self.successor, self.lower, self.upper
 
 
 def _window_bounds(
@@ -188,22 +181,9 @@ def _window_bounds(
     return np.minimum(prob(e_lo), prob(e_hi)), prob(peak)
 
 
-def enabled_pairs(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Enabled ``(state, action)`` pairs and their target cells ``(P, 2)``, state-major order."""
-    _check_grid(nx, ny, 1.0)
-    ij = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij"), -1).reshape(-1, 2)
-    target = ij[:, None, :] + ACTION_OFFSETS[None, :, :]
-    ok = (target[..., 0] >= 0) & (target[..., 0] < nx) & (target[..., 1] >= 0)
-    ok &= target[..., 1] < ny
-    state, action = np.nonzero(ok)
-    return state, action, target[state, action]
-
-
 def transition_intervals(
     bounds: CellErrorBounds,
-    nx: int,
-    ny: int,
-    cell: float,
+    grid: GridWorld,
     noise: TruncatedGaussianNoise | None = None,
 ) -> TransitionIntervals:
     """Transition intervals for every enabled (cell, action) and every reachable successor.
@@ -211,9 +191,8 @@ def transition_intervals(
     Successors with upper bound exactly 0 (unreachable given the bounded noise) are left out;
     ``out`` (index ``nx * ny``) appears wherever leaving the world is possible.
     """
-    _check_grid(nx, ny, cell)
     noise = noise or TruncatedGaussianNoise()
-    n_cells = nx * ny
+    nx, ny, cell, n_cells = grid.nx, grid.ny, grid.cell, grid.n_cells
     e_lo = np.asarray(bounds.lower, dtype=np.float64)
     e_hi = np.asarray(bounds.upper, dtype=np.float64)
     if e_lo.shape != (n_cells, 2) or e_hi.shape != (n_cells, 2):
@@ -223,8 +202,8 @@ def transition_intervals(
     bad = np.flatnonzero(~(np.isfinite(e_lo) & np.isfinite(e_hi) & (e_lo <= e_hi)).all(axis=1))
     if bad.size:
         raise IntervalError(f"error bounds of cell {int(bad[0])} are not a finite interval")
-    state, action, target = enabled_pairs(nx, ny)
-    centre = (target + 0.5) * cell
+    state, action = np.nonzero(grid.enabled[:n_cells])
+    centre = grid.target_centres[state, action]
     per_axis = []
     for d, n in ((0, nx), (1, ny)):
         lo_e = e_lo[state, d][:, None]

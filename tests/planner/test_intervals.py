@@ -6,19 +6,19 @@ from scipy.stats import truncnorm
 
 from planner.errors import IntervalError
 from planner.gp import LandingErrorGP
+from planner.imdp.grid import GridWorld
 from planner.intervals import (
-    ACTION_OFFSETS,
     CellErrorBounds,
     TruncatedGaussianNoise,
     cell_error_bounds,
     cell_sample_points,
     confidence_beta,
-    enabled_pairs,
     transition_intervals,
 )
 from tests.planner.conftest import smooth_error
 
 NX, NY, CELL = 15, 15, 1.0
+GRID = GridWorld(NX, NY, CELL)
 
 
 def _row_sums(ti):
@@ -52,20 +52,21 @@ def test_confidence_beta_is_the_union_bound_quantile():
         confidence_beta(1.5, 3)
 
 
-def test_enabled_actions_follow_the_grid_conventions():
-    state, action, target = enabled_pairs(4, 3)
-    corner = state == 0  # cell (0, 0): only N1, N2, E1, E2
-    assert action[corner].tolist() == [0, 1, 2, 3]
-    i, j = state // 3, state % 3
-    np.testing.assert_array_equal(target, np.stack([i, j], 1) + ACTION_OFFSETS[action])
-    assert (target >= 0).all() and (target[:, 0] < 4).all() and (target[:, 1] < 3).all()
+def test_rows_cover_exactly_the_enabled_actions():
+    ti = transition_intervals(_bounds(-0.1, 0.1), GRID)
+    has = np.zeros((NX * NY, 8), dtype=bool)
+    has[ti.state, ti.action] = True
+    np.testing.assert_array_equal(has, GRID.enabled[: NX * NY])
+    assert has[0].tolist() == [True, True, True, True, False, False, False, False]
+    model = GRID.imdp_from_intervals(*ti.coo())
+    assert model.n_states == NX * NY + 1
 
 
 def test_exact_error_gives_exact_probabilities():
     noise = TruncatedGaussianNoise()
     b = _bounds(0.45, 0.45)
     b.lower[:, 1] = b.upper[:, 1] = 0.0
-    ti = transition_intervals(b, NX, NY, CELL, noise)
+    ti = transition_intervals(b, GRID, noise)
     np.testing.assert_allclose(ti.lower, ti.upper)
     lo, _hi, enabled = _row_sums(ti)
     np.testing.assert_allclose(lo[enabled], 1.0, atol=1e-12)
@@ -81,7 +82,7 @@ def test_rows_bracket_one_and_out_is_handled():
     rng = np.random.default_rng(3)
     lo = rng.uniform(-0.8, 0.2, size=(NX * NY, 2))
     hi = lo + rng.uniform(0.0, 0.8, size=lo.shape)
-    ti = transition_intervals(CellErrorBounds(lo, hi, 0.0, 0.01, 1), NX, NY, CELL)
+    ti = transition_intervals(CellErrorBounds(lo, hi, 0.0, 0.01, 1), GRID)
     assert (ti.lower <= ti.upper).all() and (ti.lower >= 0).all() and (ti.upper <= 1).all()
     slo, shi, enabled = _row_sums(ti)
     assert (slo[enabled] <= 1.0 + 1e-12).all() and (shi[enabled] >= 1.0 - 1e-12).all()
@@ -96,7 +97,7 @@ def test_rows_bracket_one_and_out_is_handled():
 def test_per_axis_bounds_are_min_and_max_over_the_error_interval():
     noise = TruncatedGaussianNoise()
     e_lo, e_hi = -0.3, 0.25
-    ti = transition_intervals(_bounds(e_lo, e_hi, 5, 5), 5, 5, CELL, noise)
+    ti = transition_intervals(_bounds(e_lo, e_hi, 5, 5), GridWorld(5, 5, CELL), noise)
     sel = (ti.state == 2 * 5 + 2) & (ti.action == 0)  # N1 from (2, 2): target (2, 3)
     es = np.linspace(e_lo, e_hi, 401)
     ex, ey = np.meshgrid(es, es, indexing="ij")
@@ -113,24 +114,24 @@ def test_per_axis_bounds_are_min_and_max_over_the_error_interval():
 
 def test_bad_bounds_are_rejected():
     with pytest.raises(IntervalError, match="shape"):
-        transition_intervals(_bounds(0, 0, 3, 3), NX, NY, CELL)
+        transition_intervals(_bounds(0, 0, 3, 3), GRID)
     b = _bounds(0.0, 0.1)
     b.lower[17, 1] = 0.5
     with pytest.raises(IntervalError, match="cell 17"):
-        transition_intervals(b, NX, NY, CELL)
+        transition_intervals(b, GRID)
     with pytest.raises(IntervalError, match="sigma"):
         TruncatedGaussianNoise(sigma=0.0)
 
 
 def test_prior_intervals_are_wide():
-    ti = transition_intervals(cell_error_bounds(LandingErrorGP(), NX, NY, CELL), NX, NY, CELL)
+    ti = transition_intervals(cell_error_bounds(LandingErrorGP(), GRID), GRID)
     _, shi, enabled = _row_sums(ti)
     assert shi[enabled].min() > 2.0
 
 
 def test_error_bounds_contain_the_true_field(fitted_gp):
-    bounds = cell_error_bounds(fitted_gp, NX, NY, CELL, samples_per_axis=4)
-    dense = cell_sample_points(NX, NY, CELL, 9)  # other points than the bounds' samples
+    bounds = cell_error_bounds(fitted_gp, GRID, samples_per_axis=4)
+    dense = cell_sample_points(GRID, 9)  # other points than the bounds' samples
     truth = smooth_error(dense.reshape(-1, 2)).reshape(dense.shape)
     inside = (truth >= bounds.lower[:, None, :]) & (truth <= bounds.upper[:, None, :])
     assert inside.all(axis=(1, 2)).mean() >= 0.99
@@ -140,19 +141,18 @@ def test_error_bounds_contain_the_true_field(fitted_gp):
 def test_empirical_frequencies_lie_in_the_intervals(fitted_gp):
     rng = np.random.default_rng(12)
     noise = TruncatedGaussianNoise()
-    bounds = cell_error_bounds(fitted_gp, NX, NY, CELL)
-    ti = transition_intervals(bounds, NX, NY, CELL, noise)
-    state, action, target = enabled_pairs(NX, NY)
+    bounds = cell_error_bounds(fitted_gp, GRID)
+    ti = transition_intervals(bounds, GRID, noise)
+    state, action = np.nonzero(GRID.enabled[: NX * NY])
+    target_centre = GRID.target_centres[state, action]
     pick = rng.choice(len(state), size=40, replace=False)
     n = 300
     margin = 2.576 * np.sqrt(0.25 / n)
     ok = total = 0
     for k in pick:
         start = (np.array(divmod(int(state[k]), NY)) + rng.uniform(0, 1, (n, 2))) * CELL
-        land = (target[k] + 0.5) * CELL + smooth_error(start) + noise.sample(rng, (n, 2))
-        cell = np.floor(land / CELL).astype(int)
-        inside = (cell >= 0).all(1) & (cell[:, 0] < NX) & (cell[:, 1] < NY)
-        succ = np.where(inside, cell[:, 0] * NY + cell[:, 1], NX * NY)
+        land = target_centre[k] + smooth_error(start) + noise.sample(rng, (n, 2))
+        succ = GRID.locate(land)
         freq = np.bincount(succ, minlength=NX * NY + 1) / n
         sel = (ti.state == state[k]) & (ti.action == action[k])
         lo = np.zeros(NX * NY + 1)
