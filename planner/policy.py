@@ -58,6 +58,21 @@ class PhasePlan:
     allowed: np.ndarray
     ltl_action: np.ndarray
 
+    @classmethod
+    def masked(cls, allowed: np.ndarray, strategy: np.ndarray) -> PhasePlan:
+        """A plan from a strategy that may name actions outside ``allowed``: those entries
+        become -1 (no LTL preference), so the RL action is taken there."""
+        allowed = np.asarray(allowed, dtype=bool)
+        strategy = np.asarray(strategy, dtype=np.int64)
+        if allowed.ndim != 2 or strategy.shape != (allowed.shape[0],):
+            raise PolicyError(
+                f"strategy of shape {strategy.shape} does not fit allowed {allowed.shape}"
+            )
+        ok = (strategy >= 0) & (strategy < allowed.shape[1])
+        idx = np.flatnonzero(ok)
+        ok[idx] = allowed[idx, strategy[idx]]
+        return cls(allowed, np.where(ok, strategy, -1))
+
     def __post_init__(self) -> None:
         allowed = np.asarray(self.allowed)
         ltl = np.asarray(self.ltl_action)

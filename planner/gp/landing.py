@@ -13,9 +13,13 @@ Priors (gpytorch priors on the hyperparameters, used as MAP penalties while fitt
 * noise variance ``n``: Gamma(2, 2 / noise_std^2): mean ``noise_std^2``, floor 1e-4 m^2.
 
 With no data the model is its prior: mean ``c = 0`` and std ``prior_std`` everywhere, so the
-intervals start wide. Every :meth:`LandingErrorGP.fit` re-initialises the ``eta`` inducing
-points by k-means (scikit-learn, seeded) on the departure positions and starts the optimiser
-from the previous hyperparameters (warm start); :meth:`LandingErrorGP.reset` forgets both.
+intervals start wide. The default ``prior_std = 0.15`` m is about a third of the largest mean
+error DESIGN.md expects (0.3-0.5 m), so that ``beta * prior_std`` (about 0.74 m for the
+15 x 15 world's ``beta = 4.9``) covers it.
+
+Every :meth:`LandingErrorGP.fit` re-initialises the ``eta`` inducing points by k-means
+(scikit-learn, seeded) on the departure positions and starts the optimiser from the previous
+hyperparameters (warm start); :meth:`LandingErrorGP.reset` forgets both.
 Fitting runs ``steps`` Adam steps (learning rate ``learning_rate``) on the negative bound plus
 the negative log prior, divided by the number of data; inducing points are optimised too.
 Fitting and prediction run with ``num_threads`` torch threads (default 1: the matrices are
@@ -47,7 +51,7 @@ class FitSettings:
     num_inducing: int = 50
     steps: int = 25
     learning_rate: float = 0.05
-    prior_std: float = 0.3
+    prior_std: float = 0.15
     lengthscale: float = 2.0
     noise_std: float = 0.1
     jitter: float = 1e-6

@@ -115,6 +115,8 @@ def test_bad_plans_and_calls():
         PhasePlan(allowed, np.array([0, 1, -1]))
     with pytest.raises(PolicyError, match="p_rl_explore"):
         SwitchingSettings(p_rl_explore=1.5)
+    masked = PhasePlan.masked(allowed, np.array([0, 1, 7]))
+    assert masked.ltl_action.tolist() == [0, -1, -1]
     policy = SwitchingPolicy(SwitchingSettings(), RobustQLearner(3, 2, 3))
     with pytest.raises(PolicyError, match="before resynthesise"):
         policy.decide(0, np.random.default_rng(0))
