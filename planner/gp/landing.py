@@ -20,8 +20,10 @@ error DESIGN.md expects (0.3-0.5 m), so that ``beta * prior_std`` (about 0.74 m 
 Every :meth:`LandingErrorGP.fit` re-initialises the ``eta`` inducing points by k-means
 (scikit-learn, seeded) on the departure positions and starts the optimiser from the previous
 hyperparameters (warm start); :meth:`LandingErrorGP.reset` forgets both.
-Fitting runs ``steps`` Adam steps (learning rate ``learning_rate``) on the negative bound plus
-the negative log prior, divided by the number of data; inducing points are optimised too.
+Fitting runs Adam (learning rate ``learning_rate``) on the negative bound plus the negative
+log prior, divided by the number of data; inducing points are optimised too. The first fit
+after construction or :meth:`LandingErrorGP.reset` runs ``cold_steps`` (60) steps, every
+warm-started refit ``steps`` (15): between batches the hyperparameters move little.
 Fitting and prediction run with ``num_threads`` torch threads (default 1: the matrices are
 small, and extra threads only contend on a shared machine); the global setting is restored.
 """
@@ -49,7 +51,8 @@ class FitSettings:
     """Settings of the landing-error GPs (lengths in metres)."""
 
     num_inducing: int = 50
-    steps: int = 25
+    steps: int = 15
+    cold_steps: int = 60
     learning_rate: float = 0.05
     prior_std: float = 0.15
     lengthscale: float = 2.0
@@ -58,7 +61,7 @@ class FitSettings:
     num_threads: int | None = 1
 
     def __post_init__(self) -> None:
-        for name in ("num_inducing", "steps"):
+        for name in ("num_inducing", "steps", "cold_steps"):
             if int(getattr(self, name)) < (1 if name == "num_inducing" else 0):
                 raise GPDataError(f"FitSettings.{name} out of range: {getattr(self, name)}")
         if self.num_threads is not None and int(self.num_threads) < 1:
@@ -146,6 +149,7 @@ class LandingErrorGP:
         self.model = SparseGP(mean, kernel, likelihood, z0, jitter=s.jitter).to(_DTYPE)
         self._posterior: SparsePosterior = self.model.prior()
         self.num_data = 0
+        self._warm = False
 
     @property
     def posterior(self) -> SparsePosterior:
@@ -191,7 +195,8 @@ class LandingErrorGP:
         opt = torch.optim.Adam(self.model.parameters(), lr=self.settings.learning_rate)
         n = pos.shape[0]
         loss_value = float("nan")
-        for step in range(self.settings.steps):
+        steps = self.settings.steps if self._warm else self.settings.cold_steps
+        for step in range(steps):
             opt.zero_grad()
             loss = -(self.model.elbo(x, y).sum() + self.model.log_prior()) / n
             loss.backward()
@@ -200,6 +205,7 @@ class LandingErrorGP:
             if on_step is not None:
                 on_step(step, loss_value)
         self.num_data = n
+        self._warm = True
         self._posterior = self.model.posterior(x, y)
         return self._report(n, loss_value)
 

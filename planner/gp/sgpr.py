@@ -84,9 +84,9 @@ class SparseGP(gpytorch.Module):
         xb = x.unsqueeze(0).expand(b, *x.shape)
         z = self.inducing_points
         s2 = self.likelihood.noise.reshape(b, 1, 1)
-        kzz = self.covar_module(z, z).to_dense()
+        kzz = self.covar_module.forward(z, z)
         kzz = kzz + self.jitter * torch.eye(m, dtype=x.dtype)
-        kzx = self.covar_module(z, xb).to_dense()
+        kzx = self.covar_module.forward(z, xb)
         chol = torch.linalg.cholesky(kzz)
         a = torch.linalg.solve_triangular(chol, kzx, upper=False) / s2.sqrt()
         bmat = torch.eye(m, dtype=x.dtype) + a @ a.transpose(-1, -2)
@@ -100,11 +100,12 @@ class SparseGP(gpytorch.Module):
         n = x.shape[0]
         _, _, a, chol_b, resid, c, s2 = self._factors(x, y)
         c = c.squeeze(-1)
-        kxx_diag = self.covar_module(x.unsqueeze(0).expand(self.num_outputs, *x.shape), diag=True)
+        # stationary kernel: k(x, x) is the outputscale
+        kxx_trace = n * self.covar_module.outputscale.reshape(-1)
         log_det = 2.0 * torch.log(torch.diagonal(chol_b, dim1=-2, dim2=-1)).sum(-1)
         quad = (resid**2).sum(-1) / s2 - (c**2).sum(-1)
         log_lik = -0.5 * (n * np.log(2.0 * np.pi) + log_det + n * torch.log(s2) + quad)
-        trace = kxx_diag.sum(-1) / s2 - (a**2).sum((-1, -2))
+        trace = kxx_trace / s2 - (a**2).sum((-1, -2))
         return log_lik - 0.5 * trace
 
     def log_prior(self) -> Tensor:
@@ -137,7 +138,7 @@ class SparseGP(gpytorch.Module):
         with torch.no_grad():
             b, m = self.num_outputs, self.inducing_points.shape[1]
             eye = torch.eye(m, dtype=self.inducing_points.dtype).expand(b, m, m)
-            kzz = self.covar_module(self.inducing_points, self.inducing_points).to_dense()
+            kzz = self.covar_module.forward(self.inducing_points, self.inducing_points)
             chol = torch.linalg.cholesky(kzz + self.jitter * eye)
             const = self.mean_module(self.inducing_points[:, :1, :]).reshape(-1)
         return SparsePosterior(
@@ -169,7 +170,7 @@ class SparsePosterior:
         b = self.inducing_points.shape[0]
         with torch.no_grad():
             xb = x.unsqueeze(0).expand(b, *x.shape)
-            kzx = self.covar_module(self.inducing_points, xb).to_dense()
+            kzx = self.covar_module.forward(self.inducing_points, xb)
             mean = self.mean_constant[:, None] + torch.einsum("bm,bmn->bn", self.weights, kzx)
             v = torch.linalg.solve_triangular(self.chol_zz, kzx, upper=False)
             u = torch.linalg.solve_triangular(self.chol_b, v, upper=False)
@@ -189,7 +190,7 @@ class SparsePosterior:
         b = self.inducing_points.shape[0]
         with torch.no_grad():
             zero = torch.zeros_like(h).expand(b, 1, h.shape[-1])
-            k_h = self.covar_module(zero, h.expand(b, 1, h.shape[-1])).to_dense().reshape(b)
+            k_h = self.covar_module.forward(zero, h.expand(b, 1, h.shape[-1])).reshape(b)
             k_0 = self.covar_module.outputscale.reshape(b)
             return torch.sqrt(2.0 * (k_0 - k_h).clamp_min(0.0)).numpy().copy()
 

@@ -30,7 +30,7 @@ def test_same_seed_same_fit(synthetic_data):
     pts = np.array([[1.0, 2.0], [10.0, 12.5]])
     out = []
     for _ in range(2):
-        gp = LandingErrorGP(FitSettings(steps=5), seed=4)
+        gp = LandingErrorGP(FitSettings(steps=5, cold_steps=5), seed=4)
         gp.fit(*synthetic_data)
         out.append(gp.predict(pts))
     np.testing.assert_array_equal(out[0][0], out[1][0])
@@ -38,13 +38,16 @@ def test_same_seed_same_fit(synthetic_data):
 
 
 def test_refit_is_warm_started_and_reset_forgets(synthetic_data):
-    gp = LandingErrorGP(FitSettings(steps=10))
-    first = gp.fit(*synthetic_data)
+    gp = LandingErrorGP(FitSettings(steps=3, cold_steps=8))
+    calls: list[int] = []
+    first = gp.fit(*synthetic_data, on_step=lambda step, loss: calls.append(step))
+    second = gp.fit(*synthetic_data, on_step=lambda step, loss: calls.append(step))
+    assert calls == [*range(8), *range(3)]  # cold fit, then a warm refit
     assert not np.allclose(first.lengthscale, FitSettings().lengthscale)
     gp.settings = FitSettings(steps=0)
-    second = gp.fit(*synthetic_data)
-    np.testing.assert_allclose(second.lengthscale, first.lengthscale)
-    np.testing.assert_allclose(second.outputscale, first.outputscale)
+    third = gp.fit(*synthetic_data)
+    np.testing.assert_allclose(third.lengthscale, second.lengthscale)
+    np.testing.assert_allclose(third.outputscale, second.outputscale)
     gp.reset()
     assert gp.num_data == 0
     np.testing.assert_allclose(gp.predict(np.zeros((1, 2)))[1], FitSettings().prior_std)
