@@ -5,11 +5,21 @@ Steps (DESIGN.md "Rewards and policies"), timed separately:
 1. ``gp_fit``: refit the landing-error GPs on all data (warm-started).
 2. ``abstraction``: per-cell error bounds, transition intervals, the grid IMDP and the
    MT-PIMDP product with the automaton and the reward.
-3. ``synthesis``: worst-case satisfaction probabilities; the nonviolating sub-model, its
-   pessimistic MECs and the paper's MEC choice, the strategy steering there (exploration's
-   LTL action); the satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
+3. ``synthesis``: worst-case satisfaction probabilities; the nonviolating sub-model; the
+   paper's MEC choice among the robustly *accepting* end components (those that satisfy the
+   mandatory task; the pessimistic MECs of the nonviolating sub-model only if there are none),
+   preferring sure reachability, then the highest worst-case probability, then average
+   reward; the strategy steering there within the nonviolating sub-model (exploration's LTL
+   action). Where the worst-case probability of reaching it is 0 (early on, when the wide
+   prior intervals let the adversary cut every way), the steering strategy maximises the
+   *best-case* probability instead, so that exploration heads where the goal may be reached
+   and collects data there, while safety still comes from the nonviolating sub-model; the
+   satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
    Q-values on the nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown
-   reward: the learner's warm-started sweep on its learned rewards).
+   reward: the learner's warm-started sweep on its learned rewards); a fallback plan for
+   states without a nonviolating action: every enabled action allowed, the LTL action
+   maximising the worst-case satisfaction probability (the best-case one where the worst
+   case is 0).
 
 The result holds everything a runner needs to act: the two :class:`PhasePlan` objects, the
 worst-case satisfaction probabilities and the RL actor, ready for
@@ -27,7 +37,7 @@ import numpy as np
 from planner.automaton import RabinAutomaton
 from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
-from planner.imdp import IMDP, Solution, graph
+from planner.imdp import IMDP, Problem, ReachAvoid, Solution, Specification, graph, solve
 from planner.imdp.graph import SubModel
 from planner.imdp.grid import GridWorld
 from planner.imdp.product import MecChoice, ProductIMDP
@@ -69,6 +79,7 @@ class Resynthesis:
     mec: MecChoice | None
     exploration: PhasePlan
     goal: PhasePlan
+    fallback: PhasePlan
     q: QSolution
     rl: RLActor
     timings: dict[str, float]
@@ -120,13 +131,24 @@ def resynthesise(
     satisfaction = product.satisfaction()
     nonviolating = product.nonviolating()
     start = product.initial if current_state is None else int(current_state)
-    mecs = graph.maximal_end_components(pm, rows=nonviolating.rows, mode="pessimistic")
+    mecs = product.accepting_end_components()
+    if not mecs:
+        mecs = graph.maximal_end_components(pm, rows=nonviolating.rows, mode="pessimistic")
     mec = None
     if mecs:
         mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
         steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
+        if (steer < 0).any():
+            target = ReachAvoid(mec.component.state_mask(pm.n_states))
+            spec = Specification(target, satisfaction="optimistic")
+            hopeful = solve(Problem(pm, spec, nonviolating.actions)).strategy
+            inside = mec.component.state_mask(pm.n_states)
+            steer = np.where((steer < 0) & ~inside, hopeful, steer)
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)
+    best = satisfaction.strategy
+    if (best < 0).any():
+        best = np.where(best >= 0, best, product.satisfaction(pessimistic=False).strategy)
     satisfying = product.satisfying(s.p_sat, satisfaction)
     goal = product.goal_strategy(allowed=satisfying.actions)
     if learner is None:
@@ -154,6 +176,7 @@ def resynthesise(
         mec=mec,
         exploration=PhasePlan.masked(nonviolating.actions, steer),
         goal=PhasePlan.masked(satisfying.actions, goal),
+        fallback=PhasePlan.masked(pm.enabled.copy(), best),
         q=q,
         rl=rl,
         timings={"gp_fit": t1 - t0, "abstraction": t2 - t1, "synthesis": t3 - t2},

@@ -17,6 +17,13 @@ allows an action in ``q``. The phase then stays goal reaching; only if a later r
 leaves the current state without an allowed goal-reaching action does the policy fall back to
 exploration (reported in the decision), and it switches again under the same rule.
 
+Fallback: where the nonviolating sub-model allows no action in the current state (typically at
+the start, when the prior's wide intervals let every hop possibly leave the world or reach a
+hazard), no action is safe by the abstraction's standard. If a fallback plan is installed
+(e.g. all enabled actions, with the action that maximises the worst-case satisfaction
+probability as its LTL action), the policy takes its LTL action (its RL action where it has
+none) and reports the phase ``"fallback"``; without one it raises :class:`PolicyError`.
+
 An LTL strategy entry of -1 (no LTL preference, e.g. a state the strategy treats as reached)
 makes the policy take the RL action, reported with source ``"RL"``.
 
@@ -36,6 +43,7 @@ from planner.errors import PolicyError
 
 EXPLORATION = "exploration"
 GOAL_REACHING = "goal_reaching"
+FALLBACK = "fallback"
 LTL = "LTL"
 RL = "RL"
 
@@ -98,7 +106,7 @@ class Decision:
 
     Attributes:
         action: the chosen action.
-        phase: ``"exploration"`` or ``"goal_reaching"``.
+        phase: ``"exploration"``, ``"goal_reaching"`` or ``"fallback"``.
         source: ``"LTL"`` or ``"RL"``.
         allowed: the allowed actions in this state (the backup controller picks among them).
         p_rl: the probability with which the RL action was to be taken.
@@ -191,6 +199,7 @@ class SwitchingPolicy:
         self.rl = rl
         self.exploration: ExplorationPolicy | None = None
         self.goal: GoalReachingPolicy | None = None
+        self.fallback: ExplorationPolicy | None = None
         self.sat_probability: np.ndarray | None = None
         self.reset()
 
@@ -203,21 +212,26 @@ class SwitchingPolicy:
         self.switch_probability: float | None = None
 
     def resynthesise(
-        self, exploration: PhasePlan, goal: PhasePlan, sat_probability: np.ndarray
+        self,
+        exploration: PhasePlan,
+        goal: PhasePlan,
+        sat_probability: np.ndarray,
+        fallback: PhasePlan | None = None,
     ) -> None:
         """Install the plans of a new synthesis (phase and step counters are kept)."""
         sat = np.asarray(sat_probability, dtype=np.float64)
         shape = np.asarray(exploration.allowed).shape
-        if np.asarray(goal.allowed).shape != shape or sat.shape != (shape[0],):
+        shapes = [np.asarray(p.allowed).shape for p in (goal, fallback) if p is not None]
+        if any(sh != shape for sh in shapes) or sat.shape != (shape[0],):
             raise PolicyError(
-                f"plans and sat_probability disagree in shape: {shape}, "
-                f"{np.asarray(goal.allowed).shape}, {sat.shape}"
+                f"plans and sat_probability disagree in shape: {shape}, {shapes}, {sat.shape}"
             )
         if not np.isfinite(sat).all() or (sat < 0).any() or (sat > 1).any():
             raise PolicyError("sat_probability must lie in [0, 1]")
         s = self.settings
         self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore)
         self.goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)
+        self.fallback = None if fallback is None else ExplorationPolicy(fallback, self.rl, 0.0)
         self.sat_probability = sat
 
     def decide(self, state: int, rng: np.random.Generator) -> Decision:
@@ -234,15 +248,20 @@ class SwitchingPolicy:
             self.switch_step, self.switch_probability = self.step, sat
         elif self.phase == GOAL_REACHING and not goal_ok:
             self.phase, self.phase_step, switched = EXPLORATION, 0, True
+        explore_ok = bool(np.asarray(self.exploration.plan.allowed[state]).any())
+        phase = self.phase
         if self.phase == GOAL_REACHING:
             p_rl = self.goal.p_rl(self.phase_step)
             action, source, allowed = self.goal.choose(state, self.phase_step, rng)
+        elif not explore_ok and self.fallback is not None:
+            phase, p_rl = FALLBACK, 0.0
+            action, source, allowed = self.fallback.choose(state, rng)
         else:
             p_rl = self.exploration.p_rl
             action, source, allowed = self.exploration.choose(state, rng)
         decision = Decision(
             action=action,
-            phase=self.phase,
+            phase=phase,
             source=source,
             allowed=tuple(int(a) for a in np.flatnonzero(allowed)),
             p_rl=p_rl,
