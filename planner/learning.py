@@ -13,7 +13,9 @@ Steps (DESIGN.md "Rewards and policies"), timed separately:
    action). Where the worst-case probability of reaching it is 0 (early on, when the wide
    prior intervals let the adversary cut every way), the steering strategy maximises the
    *best-case* probability instead, so that exploration heads where the goal may be reached
-   and collects data there, while safety still comes from the nonviolating sub-model; the
+   and collects data there, while safety still comes from the nonviolating sub-model; where
+   even that is 0 (the goal lies beyond the current safe region), :func:`frontier_strategy`
+   heads for the edge of the safe region nearest to it; the
    satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
    Q-values on the nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown
    reward: the learner's warm-started sweep on its learned rewards); a fallback plan for
@@ -33,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse.csgraph import dijkstra
 
 from planner.automaton import RabinAutomaton
 from planner.errors import PolicyError
@@ -52,12 +55,44 @@ from planner.policy import PhasePlan, RLActor
 from planner.qlearning import GreedyQ, QSolution, RobustQLearner, robust_q_iteration
 
 
+def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+    """Per state, the allowed action that heads for ``target`` through the *whole* model.
+
+    ``d(s)`` is the least number of hops from ``s`` to ``target`` along edges with
+    ``upper > 0`` of any action (unreachable: ``n_states``); an action's score is the mean of
+    ``d`` over its successors weighted by their upper bounds; the allowed action of least
+    score wins (-1 where nothing is allowed). A heuristic for exploration only: it moves the
+    robot to the edge of its safe region nearest the target, where new data widen that
+    region; it carries no probability guarantee.
+    """
+    g = graph.state_graph(model)
+    tgt = np.flatnonzero(np.asarray(target, dtype=bool))
+    if tgt.size == 0:
+        return np.full(model.n_states, -1, dtype=np.int64)
+    dist = dijkstra(g.T.tocsr(), unweighted=True, indices=tgt, min_only=True)
+    dist = np.where(np.isfinite(dist), dist, float(model.n_states))
+    w = model.upper
+    num = np.bincount(model.entry_row, weights=w * dist[model.successor], minlength=model.n_rows)
+    den = np.bincount(model.entry_row, weights=w, minlength=model.n_rows)
+    score = np.where(den > 0, num / np.maximum(den, 1e-300), np.inf)
+    ok = np.asarray(allowed, dtype=bool)[model.row_state, model.row_action]
+    score = np.where(ok, score, np.inf)
+    best = np.minimum.reduceat(score, model.state_ptr[:-1])
+    first = np.full(model.n_states, -1, dtype=np.int64)
+    is_best = ok & (score == best[model.row_state]) & np.isfinite(score)
+    idx = np.flatnonzero(is_best)[::-1]  # reversed: the lowest row index is written last
+    first[model.row_state[idx]] = model.row_action[idx]
+    return first
+
+
 @dataclass(frozen=True)
 class ResynthesisSettings:
-    """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta``)."""
+    """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
+    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``)."""
 
     samples_per_axis: int = 5
     delta: float = 0.01
+    beta: float | None = None
     noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
     p_sat: float = 0.65
     discount: float = 0.95
@@ -121,7 +156,9 @@ def resynthesise(
     t0 = clock()
     fit = gp.fit(positions, errors)
     t1 = clock()
-    bounds = cell_error_bounds(gp, grid, samples_per_axis=s.samples_per_axis, delta=s.delta)
+    bounds = cell_error_bounds(
+        gp, grid, samples_per_axis=s.samples_per_axis, delta=s.delta, beta=s.beta
+    )
     intervals = transition_intervals(bounds, grid, s.noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
     w = np.zeros(grid.n_states) if reward is None else np.asarray(reward, dtype=np.float64)
@@ -138,12 +175,14 @@ def resynthesise(
     if mecs:
         mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
         steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
-        if (steer < 0).any():
-            target = ReachAvoid(mec.component.state_mask(pm.n_states))
-            spec = Specification(target, satisfaction="optimistic")
+        inside = mec.component.state_mask(pm.n_states)
+        if ((steer < 0) & ~inside).any():
+            spec = Specification(ReachAvoid(inside), satisfaction="optimistic")
             hopeful = solve(Problem(pm, spec, nonviolating.actions)).strategy
-            inside = mec.component.state_mask(pm.n_states)
             steer = np.where((steer < 0) & ~inside, hopeful, steer)
+        if ((steer < 0) & ~inside).any():
+            frontier = frontier_strategy(pm, inside, nonviolating.actions)
+            steer = np.where((steer < 0) & ~inside, frontier, steer)
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)
     best = satisfaction.strategy
