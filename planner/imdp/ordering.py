@@ -1,0 +1,136 @@
+"""The state-ordering adversary of interval MDPs, vectorised over all rows.
+
+For a row with bounds ``l <= p <= u`` and successor values ``v``, the adversary that
+*minimises* ``sum_j p_j v_j`` (Lahijanian et al. 2015, Alg. 1; Givan et al. 2000) sorts the
+successors by ``v`` ascending, gives each successor ``l_j`` and then hands the remaining mass
+``1 - sum(l)`` out in that order, at most ``u_j - l_j`` each:
+
+    p_j = l_j + clip(1 - sum(l) - G_j, 0, u_j - l_j),   G_j = sum_{k before j} (u_k - l_k).
+
+The maximising adversary does the same with ``v`` sorted descending. The chosen
+distribution only depends on the *order* of the successors, so :class:`OrderingAdversary`
+keeps the sorted layout and the resulting sparse distribution matrix between calls and
+re-sorts only the rows whose order the new values break (ties never force a re-sort).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from planner.imdp.model import IMDP
+
+
+def segmented_cumsum(x: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
+    """Inclusive prefix sums of ``x`` restarted at every segment start.
+
+    ``pos[i]`` is the position of element ``i`` inside its (contiguous) segment. A
+    Hillis-Steele scan: ``ceil(log2(max_len))`` vectorised passes, each sum only over
+    elements of one segment (no cancellation across segments).
+    """
+    out = x.astype(np.float64, copy=True)
+    d = 1
+    while d < max_len:
+        shifted = np.zeros_like(out)
+        shifted[d:] = out[:-d]
+        out += np.where(pos >= d, shifted, 0.0)
+        d *= 2
+    return out
+
+
+class OrderingAdversary:
+    """The minimising (or maximising) state-ordering adversary of one model.
+
+    Args:
+        model: the interval MDP.
+        minimize: ``True`` for the adversary that minimises the expectation (pessimistic
+            for a maximising controller), ``False`` for the one that maximises it.
+    """
+
+    def __init__(self, model: IMDP, minimize: bool = True) -> None:
+        self.model = model
+        self.minimize = bool(minimize)
+        m = model
+        self._entry_row = m.entry_row
+        self._pos = np.arange(m.n_entries, dtype=np.int64) - m.row_ptr[m.entry_row]
+        self._max_len = int(np.diff(m.row_ptr).max()) if m.n_rows else 0
+        self._remaining = 1.0 - m.row_lower_sum
+        self._perm: np.ndarray | None = None
+        self._succ = np.empty(m.n_entries, dtype=np.int64)
+        self._prob = np.empty(m.n_entries, dtype=np.float64)
+        self._matrix: sp.csr_matrix | None = None
+        self.n_sorts = 0
+        """How many times rows were (re-)sorted (a full sort counts once)."""
+
+    def _keys(self, values: np.ndarray) -> np.ndarray:
+        return values if self.minimize else -values
+
+    def _assign(self, idx: np.ndarray | slice) -> None:
+        """Recompute the distribution of the (whole) rows whose sorted entries are ``idx``."""
+        m = self.model
+        perm = self._perm[idx]
+        lo = m.lower[perm]
+        gap = m.upper[perm] - lo
+        pos = self._pos[idx]
+        before = segmented_cumsum(gap, pos, self._max_len) - gap
+        rem = self._remaining[self._entry_row[idx]]
+        self._prob[idx] = lo + np.clip(rem - before, 0.0, gap)
+        self._succ[idx] = m.successor[perm]
+
+    def _sort_all(self, keys: np.ndarray) -> None:
+        m = self.model
+        self._perm = np.lexsort((keys[m.successor], m.entry_row))
+        self._assign(slice(None))
+        self._matrix = sp.csr_matrix(
+            (self._prob, self._succ, m.row_ptr), shape=(m.n_rows, m.n_states), copy=False
+        )
+        # scipy may convert the index arrays: keep writing into the matrix's own arrays
+        self._prob = self._matrix.data
+        self._succ = self._matrix.indices
+        self.n_sorts += 1
+
+    def update(self, values: np.ndarray) -> None:
+        """Make the stored distributions optimal for ``values`` (shape ``(n_states,)``)."""
+        keys = self._keys(np.asarray(values, dtype=np.float64))
+        if self._perm is None:
+            self._sort_all(keys)
+            return
+        ks = keys[self._succ]
+        broken = (ks[1:] < ks[:-1]) & (self._pos[1:] > 0)
+        if not broken.any():
+            return
+        rows = np.unique(self._entry_row[1:][broken])
+        if rows.size * 4 > self.model.n_rows:
+            self._sort_all(keys)
+            return
+        row_mask = np.zeros(self.model.n_rows, dtype=bool)
+        row_mask[rows] = True
+        idx = np.flatnonzero(row_mask[self._entry_row])
+        local = np.lexsort((ks[idx], self._entry_row[idx]))
+        self._perm[idx] = self._perm[idx][local]
+        self._assign(idx)
+        self.n_sorts += 1
+
+    def matrix(self, values: np.ndarray) -> sp.csr_matrix:
+        """The adversary's distributions as a sparse ``(n_rows, n_states)`` matrix.
+
+        The returned matrix is a live view: a later :meth:`update` changes it in place.
+        """
+        self.update(values)
+        assert self._matrix is not None
+        return self._matrix
+
+    def expectation(self, values: np.ndarray) -> np.ndarray:
+        """``min`` (or ``max``) over the intervals of ``sum_j p_j values_j`` for every row."""
+        values = np.asarray(values, dtype=np.float64)
+        return self.matrix(values) @ values
+
+
+def worst_case_expectation(model: IMDP, values: np.ndarray) -> np.ndarray:
+    """``min_{l <= p <= u, sum p = 1} sum_j p_j values[j]`` for every row, shape ``(n_rows,)``."""
+    return OrderingAdversary(model, minimize=True).expectation(values)
+
+
+def best_case_expectation(model: IMDP, values: np.ndarray) -> np.ndarray:
+    """``max_{l <= p <= u, sum p = 1} sum_j p_j values[j]`` for every row, shape ``(n_rows,)``."""
+    return OrderingAdversary(model, minimize=False).expectation(values)
