@@ -33,7 +33,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
@@ -46,6 +45,7 @@ from planner.ltl.translate import translate
 from planner.policy import SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
 from planner.scenario import Scenario
+from planner.torch_threads import torch_threads
 
 
 @dataclass(frozen=True)
@@ -200,12 +200,8 @@ class NavigationRunner:
     # ------------------------------------------------------------------ runs
     def run(self, seed: int, run_index: int = 0) -> RunEnd:
         """One complete run; ``seed`` fixes the landing noise and every policy draw."""
-        threads = torch.get_num_threads()
-        torch.set_num_threads(self.settings.torch_threads)
-        try:
+        with torch_threads(self.settings.torch_threads):
             return self._run(seed, run_index)
-        finally:
-            torch.set_num_threads(threads)
 
     def _run(self, seed: int, run_index: int) -> RunEnd:
         t_start = self.clock()
