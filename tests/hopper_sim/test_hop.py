@@ -114,6 +114,15 @@ def test_ground_failure(model):
     assert hop.status == ref.status == "ground"
 
 
+def test_no_liftoff_failure(model):
+    """A vertical hop whose thrust damps the compression never gets back to l0."""
+    vel, alpha = np.array([0.0, 0.0, -0.5]), np.pi / 2
+    hop = simulate_hop(model, [0.0, 0.0], vel, alpha, 0.0, thrust_command=-2000.0)
+    ref = reference_hop(model.params, np.zeros(2), vel, alpha, 0.0, thrust_command=-2000.0)
+    assert hop.status == ref.status == "no_liftoff"
+    assert "l0" in hop.message
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
