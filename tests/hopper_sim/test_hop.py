@@ -156,6 +156,18 @@ def test_thrust_returns_energy_to_nominal_under_perturbation(model):
         assert abs(free.energy_after - target) > 1.0
 
 
+def test_thrust_settles_for_a_feasible_command_when_the_target_is_out_of_reach(model):
+    """Removing 400 J would end the hop (apex below l0): the regulator backs off to a command
+    whose hop works, with the least energy error it found."""
+    free = simulate_hop(model, **GAIT, record_path=False)
+    nominal = free.energy_before - 400.0
+    hop = simulate_hop(model, **GAIT, thrust=True, nominal_energy=nominal, record_path=False)
+    assert hop.ok and hop.thrust_command < 0.0
+    assert nominal < hop.energy_after < free.energy_before - 50.0
+    harder = simulate_hop(model, **GAIT, thrust_command=hop.thrust_command * 1.5, record_path=False)
+    assert not harder.ok
+
+
 @pytest.mark.parametrize("command", [-150.0, 150.0])
 def test_fixed_thrust_and_terrain_force_match_reference(model, command):
     class Constant:
