@@ -76,7 +76,7 @@ def main() -> int:
     loop_rate = n / min(loop_times)
     print(
         f"model {model.param_hash()}  dt {model.params.timestep} s  RK4  cpus {os.cpu_count()}"
-        f"  nthread {nthread}"
+        f"  nthread {nthread}  hops per MjData {args.hops_per_sim}"
     )
     print(
         f"hops {n} ({res.ok.mean():.1%} complete), mean stance {stance_steps:.0f} steps;"
