@@ -101,7 +101,8 @@ class ResynthesisSettings:
 
 @dataclass(frozen=True)
 class Resynthesis:
-    """Everything one re-synthesis produced; ``timings`` in seconds per step."""
+    """Everything one re-synthesis produced; ``timings`` in seconds per step
+    (``gp_fit``, ``abstraction``, ``synthesis``), ``synthesis_detail`` splits the last."""
 
     fit: FitReport
     bounds: CellErrorBounds
@@ -118,6 +119,7 @@ class Resynthesis:
     q: QSolution
     rl: RLActor
     timings: dict[str, float]
+    synthesis_detail: dict[str, float]
 
 
 def resynthesise(
@@ -132,6 +134,7 @@ def resynthesise(
     initial_cell: int = 0,
     current_state: int | None = None,
     settings: ResynthesisSettings | None = None,
+    previous: Resynthesis | None = None,
     clock: Callable[[], float] = time.perf_counter,
 ) -> Resynthesis:
     """Refit, rebuild and re-synthesise (see the module docstring).
@@ -148,6 +151,8 @@ def resynthesise(
         initial_cell: the IMDP's initial grid state.
         current_state: product state the MEC choice starts from (default: the initial).
         settings: see :class:`ResynthesisSettings`.
+        previous: the last re-synthesis of this run; its Q-table warm-starts the known-reward
+            Q-iteration (same grid and automaton, so the same product states).
         clock: time source for ``timings``.
     """
     if (reward is None) == (learner is None):
@@ -164,9 +169,19 @@ def resynthesise(
     w = np.zeros(grid.n_states) if reward is None else np.asarray(reward, dtype=np.float64)
     product = ProductIMDP(model, automaton, w)
     t2 = clock()
+    detail: dict[str, float] = {}
+    last = [t2]
+
+    def lap(name: str) -> None:
+        now = clock()
+        detail[name] = now - last[0]
+        last[0] = now
+
     pm = product.model
     satisfaction = product.satisfaction()
+    lap("satisfaction")
     nonviolating = product.nonviolating()
+    lap("nonviolating")
     start = product.initial if current_state is None else int(current_state)
     mecs = product.accepting_end_components()
     if not mecs:
@@ -174,6 +189,7 @@ def resynthesise(
     mec = None
     if mecs:
         mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
+        lap("mec_choice")
         steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
         inside = mec.component.state_mask(pm.n_states)
         if ((steer < 0) & ~inside).any():
@@ -185,23 +201,28 @@ def resynthesise(
             steer = np.where((steer < 0) & ~inside, frontier, steer)
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)
+    lap("steering")
     best = satisfaction.strategy
     if (best < 0).any():
         best = np.where(best >= 0, best, product.satisfaction(pessimistic=False).strategy)
+    lap("fallback")
     satisfying = product.satisfying(s.p_sat, satisfaction)
     goal = product.goal_strategy(allowed=satisfying.actions)
+    lap("goal_strategy")
     if learner is None:
         q = robust_q_iteration(
             pm,
             product.reward,
             discount=s.discount,
             allowed=nonviolating.actions,
+            initial=None if previous is None else previous.q.q,
             tolerance=s.q_tolerance,
         )
         rl: RLActor = GreedyQ(np.nan_to_num(q.q, nan=-np.inf))
     else:
         q = learner.sweep(pm, allowed=nonviolating.actions, tolerance=s.q_tolerance)
         rl = learner
+    lap("q_values")
     t3 = clock()
     return Resynthesis(
         fit=fit,
@@ -219,4 +240,5 @@ def resynthesise(
         q=q,
         rl=rl,
         timings={"gp_fit": t1 - t0, "abstraction": t2 - t1, "synthesis": t3 - t2},
+        synthesis_detail=detail,
     )

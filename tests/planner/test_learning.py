@@ -38,14 +38,14 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
     pos, err = np.zeros((0, 2)), np.zeros((0, 2))
     xy = np.array([1.5, 1.5])
     cell = int(grid.locate(xy))
-    ps = None
+    ps, r = None, None
     events = []
     for step in range(cap):
         if step % batch == 0:
             kw = {"reward": w} if learner is None else {"learner": learner}
             r = resynthesise(
                 gp, grid, until_automaton(), pos, err, initial_cell=cell,
-                current_state=ps, settings=settings, **kw,
+                current_state=ps, settings=settings, previous=r, **kw,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
             policy.rl = r.rl
