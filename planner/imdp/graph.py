@@ -196,25 +196,56 @@ def robust_positive_reach(
     return _attractor(model, target.copy(), cand)
 
 
+def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
+    """Indices of the entries whose successor is one of ``states``."""
+    ptr, entries = model.incoming()
+    starts, ends = ptr[states], ptr[states + 1]
+    lens = ends - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
+    return entries[np.arange(total) + offs]
+
+
 def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Layered robust attractor: add states with a candidate row forced into the set."""
-    x = start
-    choice = np.full(model.n_states, -1, dtype=np.int64)
-    while True:
-        live = cand_rows & ~x[model.row_state]
-        if not live.any():
+    """Layered robust attractor: add states with a candidate row forced into the set.
+
+    Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
+    entry into the states added by the previous layer, so the whole attractor costs
+    ``O(entries)`` plus ``O(rows)`` per layer.
+    """
+    m = model
+    x = start.copy()
+    choice = np.full(m.n_states, -1, dtype=np.int64)
+    inside = x[m.successor]
+    must = _row_any(m, (m.lower > 0) & inside)
+    touches = _row_any(m, inside & (m.upper > 0))
+    outside_up = np.bincount(
+        m.entry_row, weights=np.where(inside, 0.0, m.upper), minlength=m.n_rows
+    )
+    limit = 1.0 - m.tolerance
+    check = np.flatnonzero(cand_rows & (must | touches))
+    while check.size:
+        ok = check[
+            ~x[m.row_state[check]] & (must[check] | (touches[check] & (outside_up[check] < limit)))
+        ]
+        if ok.size == 0:
             break
-        f = np.flatnonzero(live & forced_into(model, x))
-        if f.size == 0:
-            break
-        states = model.row_state[f]
-        # first qualifying row per state (rows are sorted by state)
+        states = m.row_state[ok]
         first = np.unique(states, return_index=True)[1]
-        choice[states[first]] = f[first]
-        x = x.copy()
-        x[states] = True
+        new = states[first]
+        choice[new] = ok[first]
+        x[new] = True
+        e = _gather_incoming(m, new)
+        er = m.entry_row[e]
+        must[er[m.lower[e] > 0]] = True
+        touches[er[m.upper[e] > 0]] = True
+        np.subtract.at(outside_up, er, m.upper[e])
+        rows = np.unique(er)
+        check = rows[cand_rows[rows]]
     return x, choice
 
 

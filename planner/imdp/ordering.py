@@ -38,6 +38,21 @@ def segmented_cumsum(x: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray
     return out
 
 
+def row_entries(model: IMDP, rows: np.ndarray) -> np.ndarray:
+    """Entry indices of the given rows, row after row."""
+    starts = model.row_ptr[rows]
+    lens = model.row_ptr[rows + 1] - starts
+    total = int(lens.sum())
+    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
+    return np.arange(total, dtype=np.int64) + offs
+
+
+def _ranks(keys: np.ndarray) -> np.ndarray:
+    rank = np.empty(keys.size, dtype=np.int64)
+    rank[np.argsort(keys, kind="stable")] = np.arange(keys.size)
+    return rank
+
+
 class OrderingAdversary:
     """The minimising (or maximising) state-ordering adversary of one model.
 
@@ -45,19 +60,46 @@ class OrderingAdversary:
         model: the interval MDP.
         minimize: ``True`` for the adversary that minimises the expectation (pessimistic
             for a maximising controller), ``False`` for the one that maximises it.
+        rows: optional row indices (sorted) to work on; :meth:`expectation` then returns
+            one value per given row.
+        resort_tolerance: successors whose values are out of order by at most this much
+            are not re-sorted; the returned expectation is then off by at most
+            ``resort_tolerance`` times the row length. 0 (default) keeps the order exact.
     """
 
-    def __init__(self, model: IMDP, minimize: bool = True) -> None:
+    def __init__(
+        self,
+        model: IMDP,
+        minimize: bool = True,
+        rows: np.ndarray | None = None,
+        resort_tolerance: float = 0.0,
+    ) -> None:
         self.model = model
         self.minimize = bool(minimize)
+        self.resort_tolerance = float(resort_tolerance)
         m = model
-        self._entry_row = m.entry_row
-        self._pos = np.arange(m.n_entries, dtype=np.int64) - m.row_ptr[m.entry_row]
-        self._max_len = int(np.diff(m.row_ptr).max()) if m.n_rows else 0
-        self._remaining = 1.0 - m.row_lower_sum
+        if rows is None:
+            self.rows = np.arange(m.n_rows, dtype=np.int64)
+            entries = np.arange(m.n_entries, dtype=np.int64)
+            self._row_ptr = m.row_ptr
+            self._entry_row = m.entry_row
+        else:
+            self.rows = np.asarray(rows, dtype=np.int64)
+            entries = row_entries(m, self.rows)
+            lens = m.row_ptr[self.rows + 1] - m.row_ptr[self.rows]
+            self._row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
+            self._entry_row = np.repeat(np.arange(self.rows.size, dtype=np.int64), lens)
+        self.n_rows = int(self.rows.size)
+        self._successor = m.successor[entries]
+        self._lower = m.lower[entries]
+        self._gap = m.upper[entries] - self._lower
+        self._pos = np.arange(entries.size, dtype=np.int64) - self._row_ptr[self._entry_row]
+        lens = np.diff(self._row_ptr)
+        self._max_len = int(lens.max()) if lens.size else 0
+        self._remaining = 1.0 - m.row_lower_sum[self.rows]
         self._perm: np.ndarray | None = None
-        self._succ = np.empty(m.n_entries, dtype=np.int64)
-        self._prob = np.empty(m.n_entries, dtype=np.float64)
+        self._succ = np.empty(entries.size, dtype=np.int64)
+        self._prob = np.empty(entries.size, dtype=np.float64)
         self._matrix: sp.csr_matrix | None = None
         self.n_sorts = 0
         """How many times rows were (re-)sorted (a full sort counts once)."""
@@ -67,22 +109,24 @@ class OrderingAdversary:
 
     def _assign(self, idx: np.ndarray | slice) -> None:
         """Recompute the distribution of the (whole) rows whose sorted entries are ``idx``."""
-        m = self.model
         perm = self._perm[idx]
-        lo = m.lower[perm]
-        gap = m.upper[perm] - lo
+        lo = self._lower[perm]
+        gap = self._gap[perm]
         pos = self._pos[idx]
         before = segmented_cumsum(gap, pos, self._max_len) - gap
         rem = self._remaining[self._entry_row[idx]]
         self._prob[idx] = lo + np.clip(rem - before, 0.0, gap)
-        self._succ[idx] = m.successor[perm]
+        self._succ[idx] = self._successor[perm]
 
     def _sort_all(self, keys: np.ndarray) -> None:
         m = self.model
-        self._perm = np.lexsort((keys[m.successor], m.entry_row))
+        rank = _ranks(keys)
+        self._perm = np.argsort(self._entry_row * m.n_states + rank[self._successor], kind="stable")
         self._assign(slice(None))
         self._matrix = sp.csr_matrix(
-            (self._prob, self._succ, m.row_ptr), shape=(m.n_rows, m.n_states), copy=False
+            (self._prob, self._succ, self._row_ptr),
+            shape=(self.n_rows, m.n_states),
+            copy=False,
         )
         # scipy may convert the index arrays: keep writing into the matrix's own arrays
         self._prob = self._matrix.data
@@ -96,26 +140,28 @@ class OrderingAdversary:
             self._sort_all(keys)
             return
         ks = keys[self._succ]
-        broken = (ks[1:] < ks[:-1]) & (self._pos[1:] > 0)
+        broken = (ks[:-1] - ks[1:] > self.resort_tolerance) & (self._pos[1:] > 0)
         if not broken.any():
             return
         rows = np.unique(self._entry_row[1:][broken])
-        if rows.size * 4 > self.model.n_rows:
+        if rows.size * 4 > self.n_rows:
             self._sort_all(keys)
             return
-        row_mask = np.zeros(self.model.n_rows, dtype=bool)
-        row_mask[rows] = True
-        idx = np.flatnonzero(row_mask[self._entry_row])
-        local = np.lexsort((ks[idx], self._entry_row[idx]))
+        starts = self._row_ptr[rows]
+        lens = self._row_ptr[rows + 1] - starts
+        idx = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(
+            starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens
+        )
+        local_row = np.repeat(np.arange(rows.size, dtype=np.int64), lens)
+        sub_keys = ks[idx]
+        local = np.argsort(local_row * idx.size + _ranks(sub_keys), kind="stable")
         self._perm[idx] = self._perm[idx][local]
         self._assign(idx)
         self.n_sorts += 1
 
     def matrix(self, values: np.ndarray) -> sp.csr_matrix:
-        """The adversary's distributions as a sparse ``(n_rows, n_states)`` matrix.
-
-        The returned matrix is a live view: a later :meth:`update` changes it in place.
-        """
+        """The adversary's distributions as a sparse ``(n_rows, n_states)`` matrix (one row
+        per selected row). A live view: a later :meth:`update` changes it in place."""
         self.update(values)
         assert self._matrix is not None
         return self._matrix

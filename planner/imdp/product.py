@@ -307,6 +307,34 @@ class ProductIMDP:
         strategy[component.states] = self._inside_strategy(component, rows)
         return strategy
 
+    def labelled_model(self) -> IMDP:
+        """The product model with two extra labels for other tools: ``accept`` on the
+        states of the accepting end components (so ``Pmax=? [F "accept"]`` is the
+        satisfaction probability) and ``fail`` on the failure states."""
+        acc, fail = self.accepting_states(), self.failure_states()
+        for name in ("accept", "fail"):
+            if name in self.model.propositions:
+                raise ProductError(f"the model already uses the label {name!r}")
+        labels = [
+            ls | ({"accept"} if a else set()) | ({"fail"} if f else set())
+            for ls, a, f in zip(self.model.labels, acc, fail, strict=True)
+        ]
+        s, a, t, lo, up = self.model.coo()
+        return IMDP(
+            self.n_states,
+            s,
+            a,
+            t,
+            lo,
+            up,
+            n_actions=self.model.n_actions,
+            labels=labels,
+            propositions=(*self.model.propositions, "accept", "fail"),
+            initial=self.model.initial,
+            action_names=self.model.action_names,
+            tolerance=self.model.tolerance,
+        )
+
     def component_actions(self, component: EndComponent) -> np.ndarray:
         """``(n_states, n_actions)`` mask of the component's actions."""
         return graph.actions_from_rows(self.model, component.row_mask(self.model.n_rows))

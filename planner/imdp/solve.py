@@ -253,31 +253,44 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         discount = float(prop.discount)
     fixed_val = np.where(fixed, fixed_val, 0.0)
 
-    adv = OrderingAdversary(m, minimize=adversary_minimizes)
-    blocked = -np.inf if maximize else np.inf
-    v = fixed_val.copy()
-    residual = np.inf
-    it = 0
-    q = np.zeros(m.n_rows)
     free = ~fixed
-    if free.any():
-        while it < alg.max_iterations:
-            it += 1
-            target_vals = v if reward is None else reward + discount * v
-            q = adv.expectation(target_vals)
-            q[~rows] = blocked
-            v_new = np.where(free, _reduce(m, q, maximize), fixed_val)
-            residual = float(np.max(np.abs(v_new - v)))
-            v = v_new
-            if alg.callback is not None:
-                alg.callback(it, residual)
-            if residual < alg.tolerance:
+    free_rows = np.flatnonzero(rows & free[m.row_state])
+    rs = m.row_state[free_rows]
+    seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1]))) if rs.size else rs
+    seg_states = rs[seg]
+    op = np.maximum if maximize else np.minimum
+    # sweeps tolerate out-of-order successors closer than tolerance / 100 (no re-sort);
+    # the last sweep is repeated with the exact order until it too meets the tolerance
+    lazy = OrderingAdversary(
+        m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
+    )
+    v = fixed_val.copy()
+    residual = 0.0
+    it = 0
+    exact = False
+    while free_rows.size and it < alg.max_iterations:
+        it += 1
+        target_vals = v if reward is None else reward + discount * v
+        if exact:
+            lazy.resort_tolerance = 0.0
+        q_sub = lazy.expectation(target_vals)
+        v_new = v.copy()
+        v_new[seg_states] = op.reduceat(q_sub, seg)
+        residual = float(np.max(np.abs(v_new - v)))
+        v = v_new
+        if alg.callback is not None:
+            alg.callback(it, residual)
+        if residual < alg.tolerance:
+            if exact:
                 break
-    else:
-        residual = 0.0
+            exact = True
     target_vals = v if reward is None else reward + discount * v
-    q = adv.expectation(target_vals)
-    q = np.where(rows, q, np.nan)
+    q = np.full(m.n_rows, np.nan)
+    all_rows = np.flatnonzero(rows)
+    if all_rows.size:
+        q[all_rows] = OrderingAdversary(m, adversary_minimizes, rows=all_rows).expectation(
+            target_vals
+        )
     strategy = _strategy(m, q, v, rows, free, maximize, alg.tolerance, isinstance(prop, ReachAvoid))
     if isinstance(prop, ReachAvoid) and maximize and pessimistic:
         strategy = np.where(prob1 & (prob1_choice >= 0), m.row_action[prob1_choice], strategy)
