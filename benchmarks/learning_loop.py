@@ -77,7 +77,7 @@ def main() -> int:
     noise = TruncatedGaussianNoise()
     gp = LandingErrorGP(seed=args.seed)
     settings = ResynthesisSettings(beta=args.beta)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005), None)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005))
     t0 = time.perf_counter()
     gp.warm_up()
     print(f"one-time GP warm-up: {time.perf_counter() - t0:.2f} s")
@@ -95,8 +95,7 @@ def main() -> int:
                 current_state=ps, settings=settings, previous=r,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
-            policy.rl = r.rl
-            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
+            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
             timings.append(r.timings | {"detail": r.synthesis_detail})
         d = policy.decide(ps, rng)
         phases[d.phase] = phases.get(d.phase, 0) + 1

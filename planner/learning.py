@@ -147,7 +147,8 @@ def resynthesise(
         reward: known ``W`` per grid state (``grid.n_states``); exactly one of ``reward``
             and ``learner`` must be given.
         learner: for an unknown reward, a learner over the product states whose cells are
-            the grid states (``state_cell = product.base_state``).
+            the grid states (``state_cell = product.base_state``); its learned rewards
+            (prior where unvisited) stand in for ``W`` in the product and the MEC choice.
         initial_cell: the IMDP's initial grid state.
         current_state: product state the MEC choice starts from (default: the initial).
         settings: see :class:`ResynthesisSettings`.
@@ -166,7 +167,16 @@ def resynthesise(
     )
     intervals = transition_intervals(bounds, grid, s.noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
-    w = np.zeros(grid.n_states) if reward is None else np.asarray(reward, dtype=np.float64)
+    if reward is not None:
+        w = np.asarray(reward, dtype=np.float64)
+    else:
+        assert learner is not None
+        w = learner.cell_reward()
+        if w.shape != (grid.n_states,):
+            raise PolicyError(
+                f"the learner's reward cells must be the {grid.n_states} grid states, got "
+                f"{w.shape[0]}"
+            )
     product = ProductIMDP(model, automaton, w)
     t2 = clock()
     detail: dict[str, float] = {}

@@ -34,7 +34,7 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
     noise = TruncatedGaussianNoise()
     gp = LandingErrorGP(FitSettings(steps=5, cold_steps=20), seed=seed)
     settings = ResynthesisSettings(beta=3.0, q_tolerance=1e-4)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02), None)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02))
     pos, err = np.zeros((0, 2)), np.zeros((0, 2))
     xy = np.array([1.5, 1.5])
     cell = int(grid.locate(xy))
@@ -48,8 +48,7 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
                 current_state=ps, settings=settings, previous=r, **kw,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
-            policy.rl = r.rl
-            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
+            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
         d = policy.decide(ps, rng)
         target = grid.target_centres[cell, d.action]
         land = target + 0.6 * smooth_error(xy[None])[0] + noise.sample(rng, 2)
