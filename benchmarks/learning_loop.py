@@ -7,7 +7,7 @@ truncated-Gaussian noise nu. After every batch the loop calls
 per-batch timings, their worst total against the 1 s budget of the issue (ratio), and the run's
 outcome. The layout is copied from the scenario branch's ``a.toml`` (provisional).
 
-    python benchmarks/learning_loop.py [--seed 0] [--beta 3.0] [--batch 50] [--cap 500]
+    python benchmarks/learning_loop.py [--seed 0] [--runs 1] [--beta B] [--batch 50] [--cap 500]
 """
 
 from __future__ import annotations
@@ -64,31 +64,22 @@ def field(p: np.ndarray) -> np.ndarray:
     return np.stack([0.3 * np.sin(x / 2) + 0.1 * np.cos(y / 3), 0.25 * np.cos(x / 3 + y / 2)], 1)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--beta", type=float, default=None, help="default: union bound, delta 0.01")
-    ap.add_argument("--batch", type=int, default=50)
-    ap.add_argument("--cap", type=int, default=500)
-    args = ap.parse_args()
-    torch.set_num_threads(1)
+def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
+    """One simulated run from the start cell; ``gp`` is reset (its data are per run)."""
     grid, w, start = case_a()
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(seed)
     noise = TruncatedGaussianNoise()
-    gp = LandingErrorGP(seed=args.seed)
+    gp.reset()
     settings = ResynthesisSettings(beta=args.beta)
     policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005))
-    t0 = time.perf_counter()
-    gp.warm_up()
-    print(f"one-time GP warm-up: {time.perf_counter() - t0:.2f} s")
     pos, err = np.zeros((0, 2)), np.zeros((0, 2))
     cell = start
     xy = grid.centres()[cell]
     ps, r = None, None
     timings, phases, reward, outcome = [], {}, 0.0, "timeout"
     t_run = time.perf_counter()
-    bar = tqdm(range(args.cap), desc="hops")
-    for step in bar:
+    step = 0
+    for step in tqdm(range(args.cap), desc=f"seed {seed}", leave=False):
         if step % args.batch == 0:
             r = resynthesise(
                 gp, grid, until_automaton(), pos, err, reward=w, initial_cell=cell,
@@ -111,18 +102,62 @@ def main() -> int:
             outcome = "success"
         if outcome != "timeout":
             break
-    bar.close()
-    run_s = time.perf_counter() - t_run
-    totals = [t["gp_fit"] + t["abstraction"] + t["synthesis"] for t in timings]
-    print(f"outcome {outcome} after {step + 1} hops, reward {reward:.1f}, phases {phases}")
-    print(f"switch at hop {policy.switch_step}, worst-case probability {policy.switch_probability}")
-    for k, t in enumerate(timings):
-        main_t = ", ".join(f"{n} {t[n]:.3f} s" for n in ("gp_fit", "abstraction", "synthesis"))
-        detail = ", ".join(f"{n} {v:.3f}" for n, v in t["detail"].items())
-        print(f"batch {k}: {main_t} ({detail})")
+    return {
+        "seed": seed,
+        "outcome": outcome,
+        "hops": step + 1,
+        "reward": reward,
+        "phases": phases,
+        "switch_step": policy.switch_step,
+        "switch_probability": policy.switch_probability,
+        "timings": timings,
+        "run_s": time.perf_counter() - t_run,
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--runs", type=int, default=1, help="seeds seed .. seed + runs - 1")
+    ap.add_argument("--beta", type=float, default=None, help="default: union bound, delta 0.01")
+    ap.add_argument("--batch", type=int, default=50)
+    ap.add_argument("--cap", type=int, default=500)
+    ap.add_argument("--verbose", action="store_true", help="print every batch's timings")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    gp = LandingErrorGP(seed=args.seed)
+    t0 = time.perf_counter()
+    gp.warm_up()
+    print(f"one-time GP warm-up: {time.perf_counter() - t0:.2f} s")
+    results = [run_once(args.seed + k, args, gp) for k in range(args.runs)]
+    totals = []
+    for res in results:
+        tot = [t["gp_fit"] + t["abstraction"] + t["synthesis"] for t in res["timings"]]
+        totals += tot
+        print(
+            f"seed {res['seed']}: {res['outcome']} after {res['hops']} hops, reward "
+            f"{res['reward']:.1f}, phases {res['phases']}, switch at hop {res['switch_step']} "
+            f"(worst-case probability {res['switch_probability']}), run {res['run_s']:.2f} s, "
+            f"per-batch max {max(tot):.3f} s"
+        )
+        if args.verbose:
+            for k, t in enumerate(res["timings"]):
+                main_t = ", ".join(
+                    f"{n} {t[n]:.3f} s" for n in ("gp_fit", "abstraction", "synthesis")
+                )
+                detail = ", ".join(f"{n} {v:.3f}" for n, v in t["detail"].items())
+                print(f"  batch {k}: {main_t} ({detail})")
+    outcomes = [res["outcome"] for res in results]
+    switched = [res["switch_probability"] for res in results if res["switch_probability"]]
+    print(
+        f"outcomes: {outcomes.count('success')} success, {outcomes.count('violation')} "
+        f"violation, {outcomes.count('timeout')} timeout of {len(results)}"
+    )
+    if switched:
+        print(f"worst-case probability at the switch: min {min(switched):.3f}")
     print(f"per-batch total: median {np.median(totals):.3f} s, max {max(totals):.3f} s")
+    print(f"ratio median per-batch / budget {BUDGET_S} s: {np.median(totals) / BUDGET_S:.3f}")
     print(f"ratio max per-batch / budget {BUDGET_S} s: {max(totals) / BUDGET_S:.3f}")
-    print(f"whole run (planning + simulated hops): {run_s:.2f} s")
     return 0
 
 
