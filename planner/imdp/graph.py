@@ -243,8 +243,8 @@ def _attractor(
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
-        np.subtract.at(outside_up, er, m.upper[e])
         rows = np.unique(er)
+        outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
         check = rows[cand_rows[rows]]
     return x, choice
 

@@ -157,6 +157,13 @@ class ProductIMDP:
             self._accepting = out
         return list(self._accepting)
 
+    def end_components(self, allowed: np.ndarray | None = None) -> list[EndComponent]:
+        """Maximal end components (pessimistic: closed under every adversary) of the
+        sub-model with the ``(n_states, n_actions)`` mask ``allowed`` of actions; with the
+        nonviolating sub-model's actions these are the exploration candidates."""
+        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+        return graph.maximal_end_components(self.model, rows=rows)
+
     def accepting_states(self) -> np.ndarray:
         """Union of the states of the accepting end components."""
         mask = np.zeros(self.n_states, dtype=bool)
