@@ -70,7 +70,7 @@ def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
     rng = np.random.default_rng(seed)
     noise = TruncatedGaussianNoise()
     gp.reset()
-    settings = ResynthesisSettings(beta=args.beta)
+    settings = ResynthesisSettings(beta=args.beta, candidates=args.candidates)
     policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005))
     pos, err = np.zeros((0, 2)), np.zeros((0, 2))
     cell = start
@@ -120,6 +120,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--runs", type=int, default=1, help="seeds seed .. seed + runs - 1")
     ap.add_argument("--beta", type=float, default=None, help="default: union bound, delta 0.01")
+    ap.add_argument("--candidates", choices=("accepting", "nonviolating"), default="accepting")
     ap.add_argument("--batch", type=int, default=50)
     ap.add_argument("--cap", type=int, default=500)
     ap.add_argument("--verbose", action="store_true", help="print every batch's timings")

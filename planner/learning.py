@@ -88,7 +88,13 @@ def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> n
 @dataclass(frozen=True)
 class ResynthesisSettings:
     """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
-    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``)."""
+    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``).
+
+    ``candidates``: the end components the exploration steers to: ``"accepting"`` (default;
+    the robustly accepting ones, falling back to the next option if there are none) or
+    ``"nonviolating"`` (all pessimistic MECs of the nonviolating sub-model, the paper's
+    literal reading).
+    """
 
     samples_per_axis: int = 5
     delta: float = 0.01
@@ -97,6 +103,13 @@ class ResynthesisSettings:
     p_sat: float = 0.65
     discount: float = 0.95
     q_tolerance: float = 1e-6
+    candidates: str = "accepting"
+
+    def __post_init__(self) -> None:
+        if self.candidates not in ("accepting", "nonviolating"):
+            raise PolicyError(
+                f"candidates must be 'accepting' or 'nonviolating', got {self.candidates!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -193,9 +206,9 @@ def resynthesise(
     nonviolating = product.nonviolating()
     lap("nonviolating")
     start = product.initial if current_state is None else int(current_state)
-    mecs = product.accepting_end_components()
+    mecs = product.accepting_end_components() if s.candidates == "accepting" else []
     if not mecs:
-        mecs = graph.maximal_end_components(pm, rows=nonviolating.rows, mode="pessimistic")
+        mecs = product.end_components(nonviolating.actions)
     mec = None
     if mecs:
         mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
