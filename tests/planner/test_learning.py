@@ -120,3 +120,19 @@ def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
     strategy = frontier_strategy(model, target, allowed)
     assert strategy[:3].tolist() == [0, 0, 1]
     assert (frontier_strategy(model, np.zeros(4, bool), allowed) == -1).all()
+
+
+def test_exploration_candidates_setting():
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    settings = ResynthesisSettings(beta=3.0, candidates="nonviolating")
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=settings)  # fmt: skip
+    assert r.mec is not None
+    assert r.nonviolating.states[r.mec.component.states].all()
+    r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                      initial_cell=9, settings=ResynthesisSettings(beta=3.0))  # fmt: skip
+    assert r2.mec is not None
+    assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
+    with pytest.raises(PolicyError, match="candidates"):
+        ResynthesisSettings(candidates="all")
