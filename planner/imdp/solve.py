@@ -171,11 +171,15 @@ class ValueIteration:
         max_iterations: give up after this many sweeps (the solution then reports
             ``converged=False``).
         callback: called as ``callback(iteration, residual)`` after every sweep.
+        precompute: settle the states of (worst- or best-case) reachability probability
+            0 and (worst case) 1 by graph analysis before iterating (default). Without it
+            the iteration alone approaches the same least fixed point, more slowly.
     """
 
     tolerance: float = 1e-8
     max_iterations: int = 1_000_000
     callback: Callable[[int, float], None] | None = None
+    precompute: bool = True
 
     def __post_init__(self) -> None:
         if not self.tolerance > 0:
@@ -248,7 +252,9 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
             if prop.avoid is None
             else resolve_states(m, prop.avoid, "avoid") & ~target
         )
-        if maximize and pessimistic:
+        if not alg.precompute:
+            zero = np.zeros(n, dtype=bool)
+        elif maximize and pessimistic:
             pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
             prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows)
             zero = ~pos
