@@ -23,7 +23,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from planner.errors import SpecificationError
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 
 
 @dataclass(frozen=True)
@@ -236,7 +236,7 @@ def _attractor(
         if ok.size == 0:
             break
         states = m.row_state[ok]
-        first = np.unique(states, return_index=True)[1]
+        first = first_of_runs(states)  # rows (hence states) are in increasing order
         new = states[first]
         choice[new] = ok[first]
         x[new] = True
@@ -244,7 +244,9 @@ def _attractor(
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
-        rows = np.unique(er)
+        mark = np.zeros(m.n_rows, dtype=bool)
+        mark[er] = True
+        rows = np.flatnonzero(mark)
         outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
         check = rows[cand_rows[rows]]
     return x, choice

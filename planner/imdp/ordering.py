@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 
 
 def segmented_cumsum(x: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
@@ -51,6 +51,23 @@ def _ranks(keys: np.ndarray) -> np.ndarray:
     rank = np.empty(keys.size, dtype=np.int64)
     rank[np.argsort(keys, kind="stable")] = np.arange(keys.size)
     return rank
+
+
+def _sort_rows(keys: np.ndarray, lens: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
+    """Permutation that sorts ``keys`` within each of the consecutive rows of ``lens``
+    entries (stable), through a padded ``(rows, max_len)`` array sorted along its rows."""
+    n_rows = lens.size
+    row = np.repeat(np.arange(n_rows, dtype=np.int64), lens)
+    if n_rows * max_len > 4 * keys.size + 1024:
+        # long rows among short ones: padding would waste memory, sort (row, rank) keys
+        return np.argsort(row * max(keys.size, 1) + _ranks(keys), kind="stable")
+    padded = np.full((n_rows, max_len), np.inf)
+    padded[row, pos] = keys
+    order = np.argsort(padded, axis=1, kind="stable")
+    starts = np.concatenate(([0], np.cumsum(lens)[:-1]))
+    # +inf padding sorts last; keys equal to +inf keep their place before the padding
+    valid = np.arange(max_len)[None, :] < lens[:, None]
+    return (starts[:, None] + order)[valid]
 
 
 class OrderingAdversary:
@@ -120,8 +137,9 @@ class OrderingAdversary:
 
     def _sort_all(self, keys: np.ndarray) -> None:
         m = self.model
-        rank = _ranks(keys)
-        self._perm = np.argsort(self._entry_row * m.n_states + rank[self._successor], kind="stable")
+        self._perm = _sort_rows(
+            keys[self._successor], np.diff(self._row_ptr), self._pos, self._max_len
+        )
         self._assign(slice(None))
         self._matrix = sp.csr_matrix(
             (self._prob, self._succ, self._row_ptr),
@@ -143,7 +161,8 @@ class OrderingAdversary:
         broken = (ks[:-1] - ks[1:] > self.resort_tolerance) & (self._pos[1:] > 0)
         if not broken.any():
             return
-        rows = np.unique(self._entry_row[1:][broken])
+        rows = self._entry_row[1:][broken]
+        rows = rows[first_of_runs(rows)]
         if rows.size * 4 > self.n_rows:
             self._sort_all(keys)
             return
@@ -152,9 +171,7 @@ class OrderingAdversary:
         idx = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(
             starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens
         )
-        local_row = np.repeat(np.arange(rows.size, dtype=np.int64), lens)
-        sub_keys = ks[idx]
-        local = np.argsort(local_row * idx.size + _ranks(sub_keys), kind="stable")
+        local = _sort_rows(ks[idx], lens, self._pos[idx], self._max_len)
         self._perm[idx] = self._perm[idx][local]
         self._assign(idx)
         self.n_sorts += 1

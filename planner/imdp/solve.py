@@ -27,7 +27,7 @@ import numpy as np
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
 StateSet = np.ndarray | str | Sequence[str] | Sequence[int]
@@ -354,7 +354,7 @@ def _strategy(
     best_of[seg_states] = best
     slack = max(10 * tol, 1e-12)
     opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
-    first = opt_local[np.unique(rs[opt_local], return_index=True)[1]]
+    first = opt_local[first_of_runs(rs[opt_local])]
     choice[rs[first]] = free_rows[first]
     if isinstance(prop, ReachAvoid) and maximize:
         free = np.zeros(n, dtype=bool)
