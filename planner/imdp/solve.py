@@ -279,27 +279,44 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     def backup(v: np.ndarray) -> np.ndarray:
         return v if reward is None else reward + discount * v
 
-    # sweeps tolerate successors out of order by less than tolerance / 100 (no re-sort,
-    # see OrderingAdversary); once the residual is below the tolerance, sweeps continue
-    # with the exact order until it is below the tolerance again
+    # Reachability: sweeps use OrderingAdversary.lower_bound (no sorting; the order is
+    # refreshed every `refresh` sweeps). From v <= T(v) the iterates then increase and stay
+    # below the least fixed point. Once the residual is below the tolerance, sweeps use the
+    # exact order until the residual is below the tolerance again (the reported residual).
+    # Discounted reward: exact sweeps that tolerate successors out of order by less than
+    # tolerance / 100.
+    reach = reward is None
     full = OrderingAdversary(
-        m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
+        m,
+        adversary_minimizes,
+        rows=free_rows,
+        resort_tolerance=0.0 if reach else alg.tolerance * 1e-2,
     )
+    refresh = 8
     v = fixed_val.copy()
     residual = 0.0
     it = 0
+    exact = not reach
     while free_rows.size and it < alg.max_iterations:
         it += 1
-        q_free = full.expectation(backup(v))
+        bv = backup(v)
+        if exact:
+            q_free = full.expectation(bv)
+        else:
+            if it % refresh == 0:
+                full.update(bv)
+            q_free = full.lower_bound(bv)
         v_new = v.copy()
-        v_new[seg_states] = op.reduceat(q_free, seg)
+        best = op.reduceat(q_free, seg)
+        v_new[seg_states] = np.maximum(best, v[seg_states]) if reach else best
         residual = float(np.max(np.abs(v_new - v)))
         v = v_new
         if alg.callback is not None:
             alg.callback(it, residual)
         if residual < alg.tolerance:
-            if full.resort_tolerance == 0.0:
+            if exact and full.resort_tolerance == 0.0:
                 break
+            exact = True
             full.resort_tolerance = 0.0
     q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
