@@ -22,7 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from planner.imdp.model import IMDP
+from planner.errors import SpecificationError
+from planner.imdp.model import IMDP, first_of_runs
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,7 @@ def _all_rows(model: IMDP, rows: np.ndarray | None) -> np.ndarray:
         return np.ones(model.n_rows, dtype=bool)
     rows = np.asarray(rows, dtype=bool)
     if rows.shape != (model.n_rows,):
-        raise ValueError(f"row mask must have shape ({model.n_rows},), got {rows.shape}")
+        raise SpecificationError(f"row mask must have shape ({model.n_rows},), got {rows.shape}")
     return rows
 
 
@@ -67,7 +68,7 @@ def rows_from_actions(model: IMDP, allowed: np.ndarray) -> np.ndarray:
     """Row mask of an ``(n_states, n_actions)`` mask of allowed actions."""
     allowed = np.asarray(allowed, dtype=bool)
     if allowed.shape != (model.n_states, model.n_actions):
-        raise ValueError(
+        raise SpecificationError(
             f"action mask must have shape ({model.n_states}, {model.n_actions}), "
             f"got {allowed.shape}"
         )
@@ -235,7 +236,7 @@ def _attractor(
         if ok.size == 0:
             break
         states = m.row_state[ok]
-        first = np.unique(states, return_index=True)[1]
+        first = first_of_runs(states)  # rows (hence states) are in increasing order
         new = states[first]
         choice[new] = ok[first]
         x[new] = True
@@ -243,7 +244,9 @@ def _attractor(
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
-        rows = np.unique(er)
+        mark = np.zeros(m.n_rows, dtype=bool)
+        mark[er] = True
+        rows = np.flatnonzero(mark)
         outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
         check = rows[cand_rows[rows]]
     return x, choice
@@ -303,7 +306,7 @@ def maximal_end_components(
     :func:`accepting_end_components` for the robust acceptance question.
     """
     if mode not in ("pessimistic", "optimistic"):
-        raise ValueError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
+        raise SpecificationError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
     r = _all_rows(model, rows).copy()
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
     s = s.copy()
@@ -321,16 +324,11 @@ def maximal_end_components(
         if mode == "pessimistic":
             ok = ~_row_any(model, (model.upper > 0) & ~same)
         else:
-            lab = comp  # component-restricted cooperative stay
-            ok = np.ones(model.n_rows, dtype=bool)
             must_leave = _row_any(model, (model.lower > 0) & ~same)
             in_up = np.bincount(
-                model.entry_row,
-                weights=np.where(same, model.upper, 0.0),
-                minlength=model.n_rows,
+                model.entry_row, weights=np.where(same, model.upper, 0.0), minlength=model.n_rows
             )
             ok = ~must_leave & (in_up >= 1.0 - model.tolerance)
-            del lab
         r_new = r & ok
         s_new2 = s_new & has_row(model, r_new)
         r_new &= s_new2[model.row_state]

@@ -34,6 +34,14 @@ from planner.errors import (
     UnknownLabelError,
 )
 
+
+def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """Indices of the first element of every run of equal values in a sorted array."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+
+
 BOUND_TOLERANCE = 1e-9
 """Slack allowed when checking that a row brackets 1 (``sum l <= 1 <= sum u``)."""
 

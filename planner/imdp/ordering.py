@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 
 
 def segmented_cumsum(x: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
@@ -51,6 +51,23 @@ def _ranks(keys: np.ndarray) -> np.ndarray:
     rank = np.empty(keys.size, dtype=np.int64)
     rank[np.argsort(keys, kind="stable")] = np.arange(keys.size)
     return rank
+
+
+def _sort_rows(keys: np.ndarray, lens: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
+    """Permutation that sorts ``keys`` within each of the consecutive rows of ``lens``
+    entries (stable), through a padded ``(rows, max_len)`` array sorted along its rows."""
+    n_rows = lens.size
+    row = np.repeat(np.arange(n_rows, dtype=np.int64), lens)
+    if n_rows * max_len > 4 * keys.size + 1024:
+        # long rows among short ones: padding would waste memory, sort (row, rank) keys
+        return np.argsort(row * max(keys.size, 1) + _ranks(keys), kind="stable")
+    padded = np.full((n_rows, max_len), np.inf)
+    padded[row, pos] = keys
+    order = np.argsort(padded, axis=1, kind="stable")
+    starts = np.concatenate(([0], np.cumsum(lens)[:-1]))
+    # +inf padding sorts last; keys equal to +inf keep their place before the padding
+    valid = np.arange(max_len)[None, :] < lens[:, None]
+    return (starts[:, None] + order)[valid]
 
 
 class OrderingAdversary:
@@ -101,6 +118,8 @@ class OrderingAdversary:
         self._succ = np.empty(entries.size, dtype=np.int64)
         self._prob = np.empty(entries.size, dtype=np.float64)
         self._matrix: sp.csr_matrix | None = None
+        self._crit_succ = np.zeros(self.n_rows, dtype=np.int64)
+        self._lower_matrix: sp.csr_matrix | None = None
         self.n_sorts = 0
         """How many times rows were (re-)sorted (a full sort counts once)."""
 
@@ -114,14 +133,23 @@ class OrderingAdversary:
         gap = self._gap[perm]
         pos = self._pos[idx]
         before = segmented_cumsum(gap, pos, self._max_len) - gap
-        rem = self._remaining[self._entry_row[idx]]
+        er = self._entry_row[idx]
+        rem = self._remaining[er]
         self._prob[idx] = lo + np.clip(rem - before, 0.0, gap)
         self._succ[idx] = self._successor[perm]
+        # critical successor of each row: where the cumulative gap reaches the remaining
+        # mass (the last one if it never does); its value is the dual threshold t
+        last = np.ones(er.size, dtype=bool)
+        last[:-1] = er[1:] != er[:-1]
+        cand = np.flatnonzero((before + gap >= rem) | last)
+        first = cand[first_of_runs(er[cand])]
+        self._crit_succ[er[first]] = self._successor[perm[first]]
 
     def _sort_all(self, keys: np.ndarray) -> None:
         m = self.model
-        rank = _ranks(keys)
-        self._perm = np.argsort(self._entry_row * m.n_states + rank[self._successor], kind="stable")
+        self._perm = _sort_rows(
+            keys[self._successor], np.diff(self._row_ptr), self._pos, self._max_len
+        )
         self._assign(slice(None))
         self._matrix = sp.csr_matrix(
             (self._prob, self._succ, self._row_ptr),
@@ -143,7 +171,8 @@ class OrderingAdversary:
         broken = (ks[:-1] - ks[1:] > self.resort_tolerance) & (self._pos[1:] > 0)
         if not broken.any():
             return
-        rows = np.unique(self._entry_row[1:][broken])
+        rows = self._entry_row[1:][broken]
+        rows = rows[first_of_runs(rows)]
         if rows.size * 4 > self.n_rows:
             self._sort_all(keys)
             return
@@ -152,9 +181,7 @@ class OrderingAdversary:
         idx = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(
             starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens
         )
-        local_row = np.repeat(np.arange(rows.size, dtype=np.int64), lens)
-        sub_keys = ks[idx]
-        local = np.argsort(local_row * idx.size + _ranks(sub_keys), kind="stable")
+        local = _sort_rows(ks[idx], lens, self._pos[idx], self._max_len)
         self._perm[idx] = self._perm[idx][local]
         self._assign(idx)
         self.n_sorts += 1
@@ -170,6 +197,30 @@ class OrderingAdversary:
         """``min`` (or ``max``) over the intervals of ``sum_j p_j values_j`` for every row."""
         values = np.asarray(values, dtype=np.float64)
         return self.matrix(values) @ values
+
+    def lower_bound(self, values: np.ndarray) -> np.ndarray:
+        """A lower bound of :meth:`expectation` from the stored (possibly stale) order, with
+        no sorting; exact while the order is still right.
+
+        Maximising adversary: the stored distribution is feasible, so its expectation is
+        at most the maximum. Minimising adversary: by LP duality, for every threshold
+        ``t``, ``sum_j l_j v_j + (1 - sum l) t - sum_j (u_j - l_j) max(t - v_j, 0)`` is at
+        most the minimum; ``t`` is the value of the row's stored critical successor.
+        """
+        values = np.asarray(values, dtype=np.float64)
+        if self._perm is None:
+            self.update(values)
+        assert self._matrix is not None
+        if not self.minimize:
+            return self._matrix @ values
+        if self._lower_matrix is None:
+            self._lower_matrix = sp.csr_matrix(
+                (self._lower, self._successor, self._row_ptr), shape=self._matrix.shape
+            )
+        t = values[self._crit_succ]
+        short = np.maximum(t[self._entry_row] - values[self._successor], 0.0)
+        penalty = np.bincount(self._entry_row, weights=self._gap * short, minlength=self.n_rows)
+        return self._lower_matrix @ values + self._remaining * t - penalty
 
 
 def worst_case_expectation(model: IMDP, values: np.ndarray) -> np.ndarray:
