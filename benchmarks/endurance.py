@@ -4,7 +4,7 @@ field, landing noise and stance thrust all on.
 Steering (a simple proportional rule built on exact SLIP facts, computed here):
 
 * nominal gait: the steady hop with interstitial velocity (V_H, 0, V_Z); its touchdown angle
-  alpha* is the fixed point of the pure-SLIP hop map (vz_next = vz), found by root finding;
+  alpha* is the fixed point of the pure-SLIP hop map (vz_next = vz), ``hopper_sim.gait``;
 * alpha = alpha* + K (vz - V_Z) with K = -(d vz_next / d vz) / (d vz_next / d alpha), the
   deadbeat gain of the linearised return map (which is unstable with alpha fixed);
 * beta = clip(-K_BETA * e, -BETA_MAX, BETA_MAX), e the heading error towards the current
@@ -26,29 +26,22 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import brentq
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from hopper_sim.gait import steady_gait
 from hopper_sim.hop import simulate_hop
 from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.terrain import TerrainField
 
-V_H, V_Z = 2.0, -3.0  # nominal interstitial velocity [m/s]
+# Nominal interstitial velocity [m/s]: 1.6 m hops with an apex of 1.46 m, so that a flight
+# lasts long enough for the noise impulse (nu / t_flight) to stay moderate.
+V_H, V_Z = 2.0, -3.0
 SIDE = 8.0  # square route side [m]
 SWITCH = 1.2  # switch to the next corner within this distance [m]
 K_BETA, BETA_MAX = 0.6, 0.3
-
-
-def steady_alpha(model: HopperModel) -> float:
-    def g(a: float) -> float:
-        return (
-            simulate_hop(model, [0, 0], [V_H, 0, V_Z], a, 0.0, record_path=False).next_vel[2] - V_Z
-        )
-
-    return brentq(g, np.deg2rad(70), np.deg2rad(80), xtol=1e-12)
 
 
 def deadbeat_gain(model: HopperModel, alpha0: float, h: float = 1e-4) -> float:
@@ -73,7 +66,7 @@ def main() -> int:
     terrain = TerrainField.for_model(model, args.seed)
     rng = np.random.default_rng(args.seed)
     noise = sample_model_noise(model, rng, args.hops)
-    alpha0 = steady_alpha(model)
+    alpha0 = steady_gait(model, V_H, V_Z).alpha
     gain, multiplier = deadbeat_gain(model, alpha0)
     e_nom = float(model.energy(model.params.rest_length, np.array([V_H, 0.0, V_Z])))
     speed_nom = float(np.hypot(V_H, V_Z))
@@ -140,6 +133,12 @@ def main() -> int:
         f"nominal gait: v = ({V_H}, 0, {V_Z}) m/s, |v| = {speed_nom:.4f} m/s, "
         f"alpha* = {np.rad2deg(alpha0):.3f} deg, open-loop multiplier {multiplier:.3f}, "
         f"K = {gain:.4f} rad s/m"
+    )
+    nominal = simulate_hop(model, [0, 0], [V_H, 0, V_Z], alpha0, 0.0, record_path=False)
+    print(
+        f"nominal hop: {nominal.next_pos[0]:.3f} m, apex "
+        f"{model.params.rest_length + V_Z**2 / (2 * model.params.gravity):.3f} m, "
+        f"flight (liftoff to interstitial) {nominal.flight_time:.3f} s"
     )
     print(f"hops completed        {len(speeds)} / {args.hops}   failures {len(failures)}")
     for f in failures:

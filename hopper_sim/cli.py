@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "train_controller", "run")
+COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "train_controller", "run", "imdp")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -28,7 +28,10 @@ under the GP model (``e`` drawn from the GP prior, Gaussian observation noise) e
 the union bound the error lies in its cell's interval at all sample points of all cells, both
 axes, simultaneously with probability at least ``1 - delta``; at any single departure point the
 miss probability per axis is at most ``delta / N``. (Simultaneity over the continuum of
-departure points is not claimed.)
+departure points is not claimed. "The GP model" is the predictor's posterior taken at its
+word: for :class:`~planner.gp.LandingErrorGP` the sparse variational posterior, not the exact
+GP posterior, and the landing noise ``nu`` is truncated-Gaussian while the GP likelihood is
+Gaussian; the empirical audit is what checks the intervals against the real system.)
 
 **Transition bounds** (:func:`transition_intervals`). Per axis, the probability of landing in a
 successor's interval ``[lo, hi)`` given ``e`` is ``p(e) = F(hi - t - e) - F(lo - t - e)``,

@@ -88,7 +88,13 @@ def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> n
 @dataclass(frozen=True)
 class ResynthesisSettings:
     """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
-    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``)."""
+    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``).
+
+    ``candidates``: the end components the exploration steers to: ``"accepting"`` (default;
+    the robustly accepting ones, falling back to the next option if there are none) or
+    ``"nonviolating"`` (all pessimistic MECs of the nonviolating sub-model, the paper's
+    literal reading).
+    """
 
     samples_per_axis: int = 5
     delta: float = 0.01
@@ -97,11 +103,19 @@ class ResynthesisSettings:
     p_sat: float = 0.65
     discount: float = 0.95
     q_tolerance: float = 1e-6
+    candidates: str = "accepting"
+
+    def __post_init__(self) -> None:
+        if self.candidates not in ("accepting", "nonviolating"):
+            raise PolicyError(
+                f"candidates must be 'accepting' or 'nonviolating', got {self.candidates!r}"
+            )
 
 
 @dataclass(frozen=True)
 class Resynthesis:
-    """Everything one re-synthesis produced; ``timings`` in seconds per step."""
+    """Everything one re-synthesis produced; ``timings`` in seconds per step
+    (``gp_fit``, ``abstraction``, ``synthesis``), ``synthesis_detail`` splits the last."""
 
     fit: FitReport
     bounds: CellErrorBounds
@@ -118,6 +132,7 @@ class Resynthesis:
     q: QSolution
     rl: RLActor
     timings: dict[str, float]
+    synthesis_detail: dict[str, float]
 
 
 def resynthesise(
@@ -132,6 +147,7 @@ def resynthesise(
     initial_cell: int = 0,
     current_state: int | None = None,
     settings: ResynthesisSettings | None = None,
+    previous: Resynthesis | None = None,
     clock: Callable[[], float] = time.perf_counter,
 ) -> Resynthesis:
     """Refit, rebuild and re-synthesise (see the module docstring).
@@ -144,10 +160,13 @@ def resynthesise(
         reward: known ``W`` per grid state (``grid.n_states``); exactly one of ``reward``
             and ``learner`` must be given.
         learner: for an unknown reward, a learner over the product states whose cells are
-            the grid states (``state_cell = product.base_state``).
+            the grid states (``state_cell = product.base_state``); its learned rewards
+            (prior where unvisited) stand in for ``W`` in the product and the MEC choice.
         initial_cell: the IMDP's initial grid state.
         current_state: product state the MEC choice starts from (default: the initial).
         settings: see :class:`ResynthesisSettings`.
+        previous: the last re-synthesis of this run; its Q-table warm-starts the known-reward
+            Q-iteration (same grid and automaton, so the same product states).
         clock: time source for ``timings``.
     """
     if (reward is None) == (learner is None):
@@ -161,19 +180,39 @@ def resynthesise(
     )
     intervals = transition_intervals(bounds, grid, s.noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
-    w = np.zeros(grid.n_states) if reward is None else np.asarray(reward, dtype=np.float64)
+    if reward is not None:
+        w = np.asarray(reward, dtype=np.float64)
+    else:
+        assert learner is not None
+        w = learner.cell_reward()
+        if w.shape != (grid.n_states,):
+            raise PolicyError(
+                f"the learner's reward cells must be the {grid.n_states} grid states, got "
+                f"{w.shape[0]}"
+            )
     product = ProductIMDP(model, automaton, w)
     t2 = clock()
+    detail: dict[str, float] = {}
+    last = [t2]
+
+    def lap(name: str) -> None:
+        now = clock()
+        detail[name] = now - last[0]
+        last[0] = now
+
     pm = product.model
     satisfaction = product.satisfaction()
+    lap("satisfaction")
     nonviolating = product.nonviolating()
+    lap("nonviolating")
     start = product.initial if current_state is None else int(current_state)
-    mecs = product.accepting_end_components()
+    mecs = product.accepting_end_components() if s.candidates == "accepting" else []
     if not mecs:
-        mecs = graph.maximal_end_components(pm, rows=nonviolating.rows, mode="pessimistic")
+        mecs = product.end_components(nonviolating.actions)
     mec = None
     if mecs:
         mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
+        lap("mec_choice")
         steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
         inside = mec.component.state_mask(pm.n_states)
         if ((steer < 0) & ~inside).any():
@@ -185,23 +224,28 @@ def resynthesise(
             steer = np.where((steer < 0) & ~inside, frontier, steer)
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)
+    lap("steering")
     best = satisfaction.strategy
     if (best < 0).any():
         best = np.where(best >= 0, best, product.satisfaction(pessimistic=False).strategy)
+    lap("fallback")
     satisfying = product.satisfying(s.p_sat, satisfaction)
     goal = product.goal_strategy(allowed=satisfying.actions)
+    lap("goal_strategy")
     if learner is None:
         q = robust_q_iteration(
             pm,
             product.reward,
             discount=s.discount,
             allowed=nonviolating.actions,
+            initial=None if previous is None else previous.q.q,
             tolerance=s.q_tolerance,
         )
         rl: RLActor = GreedyQ(np.nan_to_num(q.q, nan=-np.inf))
     else:
         q = learner.sweep(pm, allowed=nonviolating.actions, tolerance=s.q_tolerance)
         rl = learner
+    lap("q_values")
     t3 = clock()
     return Resynthesis(
         fit=fit,
@@ -219,4 +263,5 @@ def resynthesise(
         q=q,
         rl=rl,
         timings={"gp_fit": t1 - t0, "abstraction": t2 - t1, "synthesis": t3 - t2},
+        synthesis_detail=detail,
     )

@@ -194,7 +194,7 @@ class SwitchingPolicy:
     and :meth:`decide` once per hop.
     """
 
-    def __init__(self, settings: SwitchingSettings, rl: RLActor) -> None:
+    def __init__(self, settings: SwitchingSettings, rl: RLActor | None = None) -> None:
         self.settings = settings
         self.rl = rl
         self.exploration: ExplorationPolicy | None = None
@@ -217,8 +217,14 @@ class SwitchingPolicy:
         goal: PhasePlan,
         sat_probability: np.ndarray,
         fallback: PhasePlan | None = None,
+        rl: RLActor | None = None,
     ) -> None:
-        """Install the plans of a new synthesis (phase and step counters are kept)."""
+        """Install the plans of a new synthesis (phase and step counters are kept); ``rl``
+        replaces the RL actor when given."""
+        if rl is not None:
+            self.rl = rl
+        if self.rl is None:
+            raise PolicyError("no RL actor: pass rl here or to the constructor")
         sat = np.asarray(sat_probability, dtype=np.float64)
         shape = np.asarray(exploration.allowed).shape
         shapes = [np.asarray(p.allowed).shape for p in (goal, fallback) if p is not None]

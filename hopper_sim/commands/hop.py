@@ -55,8 +55,8 @@ class _Runner:
         seed = case.get("perturb")
         terrain = None
         if seed is not None:
-            if isinstance(seed, bool) or not isinstance(seed, int):
-                raise HopInputError(f"perturb must be an integer seed, got {seed!r}")
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                raise HopInputError(f"perturb must be a non-negative integer seed, got {seed!r}")
             if seed not in self.terrains:
                 self.terrains[seed] = TerrainField.for_model(self.model, seed)
             terrain = self.terrains[seed]

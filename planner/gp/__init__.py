@@ -9,8 +9,15 @@ protocol.
 
 from __future__ import annotations
 
-from planner.gp.landing import FitSettings, LandingErrorGP
+from planner.gp.landing import FitReport, FitSettings, LandingErrorGP
 from planner.gp.protocol import ErrorPredictor
 from planner.gp.sgpr import SparseGP, SparsePosterior
 
-__all__ = ["ErrorPredictor", "FitSettings", "LandingErrorGP", "SparseGP", "SparsePosterior"]
+__all__ = [
+    "ErrorPredictor",
+    "FitReport",
+    "FitSettings",
+    "LandingErrorGP",
+    "SparseGP",
+    "SparsePosterior",
+]

@@ -22,7 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from planner.imdp.model import IMDP
+from planner.errors import SpecificationError
+from planner.imdp.model import IMDP, first_of_runs
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,7 @@ def _all_rows(model: IMDP, rows: np.ndarray | None) -> np.ndarray:
         return np.ones(model.n_rows, dtype=bool)
     rows = np.asarray(rows, dtype=bool)
     if rows.shape != (model.n_rows,):
-        raise ValueError(f"row mask must have shape ({model.n_rows},), got {rows.shape}")
+        raise SpecificationError(f"row mask must have shape ({model.n_rows},), got {rows.shape}")
     return rows
 
 
@@ -67,7 +68,7 @@ def rows_from_actions(model: IMDP, allowed: np.ndarray) -> np.ndarray:
     """Row mask of an ``(n_states, n_actions)`` mask of allowed actions."""
     allowed = np.asarray(allowed, dtype=bool)
     if allowed.shape != (model.n_states, model.n_actions):
-        raise ValueError(
+        raise SpecificationError(
             f"action mask must have shape ({model.n_states}, {model.n_actions}), "
             f"got {allowed.shape}"
         )
@@ -196,25 +197,58 @@ def robust_positive_reach(
     return _attractor(model, target.copy(), cand)
 
 
+def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
+    """Indices of the entries whose successor is one of ``states``."""
+    ptr, entries = model.incoming()
+    starts, ends = ptr[states], ptr[states + 1]
+    lens = ends - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
+    return entries[np.arange(total) + offs]
+
+
 def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Layered robust attractor: add states with a candidate row forced into the set."""
-    x = start
-    choice = np.full(model.n_states, -1, dtype=np.int64)
-    while True:
-        live = cand_rows & ~x[model.row_state]
-        if not live.any():
+    """Layered robust attractor: add states with a candidate row forced into the set.
+
+    Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
+    entry into the states added by the previous layer, so the whole attractor costs
+    ``O(entries)`` plus ``O(rows)`` per layer.
+    """
+    m = model
+    x = start.copy()
+    choice = np.full(m.n_states, -1, dtype=np.int64)
+    inside = x[m.successor]
+    must = _row_any(m, (m.lower > 0) & inside)
+    touches = _row_any(m, inside & (m.upper > 0))
+    outside_up = np.bincount(
+        m.entry_row, weights=np.where(inside, 0.0, m.upper), minlength=m.n_rows
+    )
+    limit = 1.0 - m.tolerance
+    check = np.flatnonzero(cand_rows & (must | touches))
+    while check.size:
+        ok = check[
+            ~x[m.row_state[check]] & (must[check] | (touches[check] & (outside_up[check] < limit)))
+        ]
+        if ok.size == 0:
             break
-        f = np.flatnonzero(live & forced_into(model, x))
-        if f.size == 0:
-            break
-        states = model.row_state[f]
-        # first qualifying row per state (rows are sorted by state)
-        first = np.unique(states, return_index=True)[1]
-        choice[states[first]] = f[first]
-        x = x.copy()
-        x[states] = True
+        states = m.row_state[ok]
+        first = first_of_runs(states)  # rows (hence states) are in increasing order
+        new = states[first]
+        choice[new] = ok[first]
+        x[new] = True
+        e = _gather_incoming(m, new)
+        er = m.entry_row[e]
+        must[er[m.lower[e] > 0]] = True
+        touches[er[m.upper[e] > 0]] = True
+        mark = np.zeros(m.n_rows, dtype=bool)
+        mark[er] = True
+        rows = np.flatnonzero(mark)
+        outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
+        check = rows[cand_rows[rows]]
     return x, choice
 
 
@@ -272,7 +306,7 @@ def maximal_end_components(
     :func:`accepting_end_components` for the robust acceptance question.
     """
     if mode not in ("pessimistic", "optimistic"):
-        raise ValueError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
+        raise SpecificationError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
     r = _all_rows(model, rows).copy()
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
     s = s.copy()
@@ -290,16 +324,11 @@ def maximal_end_components(
         if mode == "pessimistic":
             ok = ~_row_any(model, (model.upper > 0) & ~same)
         else:
-            lab = comp  # component-restricted cooperative stay
-            ok = np.ones(model.n_rows, dtype=bool)
             must_leave = _row_any(model, (model.lower > 0) & ~same)
             in_up = np.bincount(
-                model.entry_row,
-                weights=np.where(same, model.upper, 0.0),
-                minlength=model.n_rows,
+                model.entry_row, weights=np.where(same, model.upper, 0.0), minlength=model.n_rows
             )
             ok = ~must_leave & (in_up >= 1.0 - model.tolerance)
-            del lab
         r_new = r & ok
         s_new2 = s_new & has_row(model, r_new)
         r_new &= s_new2[model.row_state]

@@ -34,6 +34,14 @@ from planner.errors import (
     UnknownLabelError,
 )
 
+
+def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """Indices of the first element of every run of equal values in a sorted array."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+
+
 BOUND_TOLERANCE = 1e-9
 """Slack allowed when checking that a row brackets 1 (``sum l <= 1 <= sum u``)."""
 
@@ -185,6 +193,7 @@ class IMDP:
         self.row_index: np.ndarray = np.full((n, n_act), -1, dtype=np.int64)
         self.row_index[row_state, row_action] = np.arange(len(row_state))
 
+        self._incoming: tuple[np.ndarray, np.ndarray] | None = None
         self._set_labels(labels, propositions)
         init = np.unique(_int_array(list(initial), "initial"))
         bad = np.flatnonzero((init < 0) | (init >= n))
@@ -249,6 +258,18 @@ class IMDP:
     @property
     def n_entries(self) -> int:
         return int(self.successor.shape[0])
+
+    def incoming(self) -> tuple[np.ndarray, np.ndarray]:
+        """Reverse index ``(ptr, entries)``: ``entries[ptr[s]:ptr[s+1]]`` are the entries
+        whose successor is ``s`` (computed once, then cached)."""
+        if self._incoming is None:
+            entries = np.argsort(self.successor, kind="stable")
+            counts = np.bincount(self.successor, minlength=self.n_states)
+            ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+            entries.setflags(write=False)
+            ptr.setflags(write=False)
+            self._incoming = (ptr, entries)
+        return self._incoming
 
     def states_labelled(self, name: str) -> np.ndarray:
         """Boolean mask ``(n_states,)`` of the states that carry label ``name``.

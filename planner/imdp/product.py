@@ -157,6 +157,13 @@ class ProductIMDP:
             self._accepting = out
         return list(self._accepting)
 
+    def end_components(self, allowed: np.ndarray | None = None) -> list[EndComponent]:
+        """Maximal end components (pessimistic: closed under every adversary) of the
+        sub-model with the ``(n_states, n_actions)`` mask ``allowed`` of actions; with the
+        nonviolating sub-model's actions these are the exploration candidates."""
+        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+        return graph.maximal_end_components(self.model, rows=rows)
+
     def accepting_states(self) -> np.ndarray:
         """Union of the states of the accepting end components."""
         mask = np.zeros(self.n_states, dtype=bool)
@@ -306,6 +313,34 @@ class ProductIMDP:
         rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
         strategy[component.states] = self._inside_strategy(component, rows)
         return strategy
+
+    def labelled_model(self) -> IMDP:
+        """The product model with two extra labels for other tools: ``accept`` on the
+        states of the accepting end components (so ``Pmax=? [F "accept"]`` is the
+        satisfaction probability) and ``fail`` on the failure states."""
+        acc, fail = self.accepting_states(), self.failure_states()
+        for name in ("accept", "fail"):
+            if name in self.model.propositions:
+                raise ProductError(f"the model already uses the label {name!r}")
+        labels = [
+            ls | ({"accept"} if a else set()) | ({"fail"} if f else set())
+            for ls, a, f in zip(self.model.labels, acc, fail, strict=True)
+        ]
+        s, a, t, lo, up = self.model.coo()
+        return IMDP(
+            self.n_states,
+            s,
+            a,
+            t,
+            lo,
+            up,
+            n_actions=self.model.n_actions,
+            labels=labels,
+            propositions=(*self.model.propositions, "accept", "fail"),
+            initial=self.model.initial,
+            action_names=self.model.action_names,
+            tolerance=self.model.tolerance,
+        )
 
     def component_actions(self, component: EndComponent) -> np.ndarray:
         """``(n_states, n_actions)`` mask of the component's actions."""

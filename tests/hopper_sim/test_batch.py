@@ -98,9 +98,12 @@ def test_batch_thrust_regulates_energy(model):
 def test_batch_is_deterministic(model):
     pos, vel, alpha, beta = mixed_hops(8, seed=5)
     a = simulate_hops(model, vel, alpha, beta, pos=pos, nthread=2)
-    b = simulate_hops(model, vel, alpha, beta, pos=pos, nthread=1)
-    assert np.array_equal(a.status, b.status)
-    assert np.array_equal(a.next_pos, b.next_pos, equal_nan=True)
+    b = simulate_hops(model, vel, alpha, beta, pos=pos, nthread=1, hops_per_sim=3)
+    c = simulate_hops(model, vel, alpha, beta, pos=pos, nthread=2, hops_per_sim=1)
+    for other in (b, c):
+        assert np.array_equal(a.status, other.status)
+        assert np.array_equal(a.next_pos, other.next_pos, equal_nan=True)
+        assert np.array_equal(a.next_vel, other.next_vel, equal_nan=True)
 
 
 def test_batch_rejects_bad_rows(model):

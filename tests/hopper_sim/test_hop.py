@@ -114,6 +114,15 @@ def test_ground_failure(model):
     assert hop.status == ref.status == "ground"
 
 
+def test_no_liftoff_failure(model):
+    """A vertical hop whose thrust damps the compression never gets back to l0."""
+    vel, alpha = np.array([0.0, 0.0, -0.5]), np.pi / 2
+    hop = simulate_hop(model, [0.0, 0.0], vel, alpha, 0.0, thrust_command=-2000.0)
+    ref = reference_hop(model.params, np.zeros(2), vel, alpha, 0.0, thrust_command=-2000.0)
+    assert hop.status == ref.status == "no_liftoff"
+    assert "l0" in hop.message
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -145,6 +154,18 @@ def test_thrust_returns_energy_to_nominal_under_perturbation(model):
         assert hop.energy_after == pytest.approx(target, rel=1e-6)
         free = simulate_hop(model, **HIGH_GAIT, terrain=terrain, noise=[0.1, -0.05])
         assert abs(free.energy_after - target) > 1.0
+
+
+def test_thrust_settles_for_a_feasible_command_when_the_target_is_out_of_reach(model):
+    """Removing 400 J would end the hop (apex below l0): the regulator backs off to a command
+    whose hop works, with the least energy error it found."""
+    free = simulate_hop(model, **GAIT, record_path=False)
+    nominal = free.energy_before - 400.0
+    hop = simulate_hop(model, **GAIT, thrust=True, nominal_energy=nominal, record_path=False)
+    assert hop.ok and hop.thrust_command < 0.0
+    assert nominal < hop.energy_after < free.energy_before - 50.0
+    harder = simulate_hop(model, **GAIT, thrust_command=hop.thrust_command * 1.5, record_path=False)
+    assert not harder.ok
 
 
 @pytest.mark.parametrize("command", [-150.0, 150.0])

@@ -68,5 +68,7 @@ def test_bad_overrides_raise_specific_errors():
         HopperModel.load({"masss": 1.0})
     with pytest.raises(ModelError, match="'stiffness'"):
         HopperModel.load({"stiffness": -1.0})
+    with pytest.raises(ModelError, match="too coarse"):
+        HopperModel.load({"stiffness": 1e9})
     with pytest.raises(ModelError, match="not found"):
         HopperModel.load(path="/nonexistent/scene.xml")

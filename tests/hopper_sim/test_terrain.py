@@ -33,5 +33,7 @@ def test_single_point_and_bad_inputs():
     assert t.force(np.array([0.5, 0.5])).shape == (2,)
     with pytest.raises(TerrainError, match="shape"):
         t.force(np.zeros((3, 3)))
+    with pytest.raises(TerrainError, match="seed"):
+        TerrainField.from_seed(-1, 50.0, 1.0)
     with pytest.raises(TerrainError, match="length scale"):
         TerrainField.from_seed(1, 50.0, 0.0)

@@ -34,22 +34,21 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
     noise = TruncatedGaussianNoise()
     gp = LandingErrorGP(FitSettings(steps=5, cold_steps=20), seed=seed)
     settings = ResynthesisSettings(beta=3.0, q_tolerance=1e-4)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02), None)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02))
     pos, err = np.zeros((0, 2)), np.zeros((0, 2))
     xy = np.array([1.5, 1.5])
     cell = int(grid.locate(xy))
-    ps = None
+    ps, r = None, None
     events = []
     for step in range(cap):
         if step % batch == 0:
             kw = {"reward": w} if learner is None else {"learner": learner}
             r = resynthesise(
                 gp, grid, until_automaton(), pos, err, initial_cell=cell,
-                current_state=ps, settings=settings, **kw,
+                current_state=ps, settings=settings, previous=r, **kw,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
-            policy.rl = r.rl
-            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
+            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
         d = policy.decide(ps, rng)
         target = grid.target_centres[cell, d.action]
         land = target + 0.6 * smooth_error(xy[None])[0] + noise.sample(rng, 2)
@@ -121,3 +120,19 @@ def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
     strategy = frontier_strategy(model, target, allowed)
     assert strategy[:3].tolist() == [0, 0, 1]
     assert (frontier_strategy(model, np.zeros(4, bool), allowed) == -1).all()
+
+
+def test_exploration_candidates_setting():
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    settings = ResynthesisSettings(beta=3.0, candidates="nonviolating")
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=settings)  # fmt: skip
+    assert r.mec is not None
+    assert r.nonviolating.states[r.mec.component.states].all()
+    r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                      initial_cell=9, settings=ResynthesisSettings(beta=3.0))  # fmt: skip
+    assert r2.mec is not None
+    assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
+    with pytest.raises(PolicyError, match="candidates"):
+        ResynthesisSettings(candidates="all")

@@ -120,6 +120,12 @@ def test_bad_plans_and_calls():
     policy = SwitchingPolicy(SwitchingSettings(), RobustQLearner(3, 2, 3))
     with pytest.raises(PolicyError, match="before resynthesise"):
         policy.decide(0, np.random.default_rng(0))
+    with pytest.raises(PolicyError, match="no RL actor"):
+        SwitchingPolicy(SwitchingSettings()).resynthesise(
+            PhasePlan(allowed, np.zeros(3, dtype=int)),
+            PhasePlan(allowed, np.zeros(3, dtype=int)),
+            np.zeros(3),
+        )
     plan = PhasePlan(allowed, np.array([0, 0, 0]))
     empty = PhasePlan(np.zeros((3, 2), dtype=bool), np.full(3, -1))
     policy.resynthesise(empty, plan, np.zeros(3))

@@ -47,15 +47,17 @@ def test_jsonl_reports_failures_and_bad_lines(monkeypatch, capsys):
         {"pos": [0, 0], "vel": [2.5, 0, -2.4], "alpha": 1.324, "beta": 0.0, "noise": [0.2, 0]},
     ]
     text = "\n".join(json.dumps(x) for x in lines) + "\nnot json\n" + '{"pos": [0, 0]}\n'
+    text += json.dumps(lines[0] | {"perturb": -3}) + "\n"
     monkeypatch.setattr(sys, "stdin", io.StringIO(text))
     assert main(["hop", "--jsonl"]) == 2
     out = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
     assert [o["status"] for o in out] == [
-        "ok", "no_touchdown", "ok", "invalid_input", "invalid_input",
+        "ok", "no_touchdown", "ok", "invalid_input", "invalid_input", "invalid_input",
     ]  # fmt: skip
     assert out[1]["ok"] is False and out[1]["next_pos"] is None
     assert np.allclose(np.subtract(out[2]["next_pos"], out[0]["next_pos"]), [0.2, 0.0], atol=1e-6)
     assert out[4]["message"] == "line 5: missing key 'vel'"
+    assert "non-negative integer seed" in out[5]["message"]
 
 
 def test_console_entry_runs_as_a_module():

@@ -53,6 +53,13 @@ def test_refit_is_warm_started_and_reset_forgets(synthetic_data):
     np.testing.assert_allclose(gp.predict(np.zeros((1, 2)))[1], FitSettings().prior_std)
 
 
+def test_warm_up_leaves_the_prior():
+    gp = LandingErrorGP()
+    gp.warm_up()
+    assert gp.num_data == 0
+    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], FitSettings().prior_std)
+
+
 def test_few_points_use_them_as_inducing_points():
     gp = LandingErrorGP()
     pos = np.array([[1.0, 1.0], [2.0, 1.5], [1.0, 1.0]])

@@ -64,3 +64,30 @@ def test_segmented_cumsum_restarts_per_segment():
     x = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
     pos = np.array([0, 1, 2, 0, 1, 0])
     assert segmented_cumsum(x, pos, 3).tolist() == [1, 3, 6, 4, 9, 6]
+
+
+@pytest.mark.parametrize("lens", [[3, 1, 4, 2], [1, 1, 1, 200]])
+def test_row_sort_padded_and_long_row_paths(lens):
+    from planner.imdp.ordering import _sort_rows
+
+    rng = np.random.default_rng(2)
+    lens = np.array(lens)
+    keys = rng.integers(0, 3, size=lens.sum()).astype(float)  # many ties
+    row = np.repeat(np.arange(lens.size), lens)
+    pos = np.arange(lens.sum()) - np.repeat(np.cumsum(lens) - lens, lens)
+    got = _sort_rows(keys, lens, pos, int(lens.max()))
+    assert got.tolist() == np.lexsort((keys, row)).tolist()
+
+
+@pytest.mark.parametrize("minimize", [True, False])
+def test_lower_bound_from_a_stale_order(minimize):
+    rng = np.random.default_rng(17)
+    m = random_imdp(rng, n_states=40, max_succ=7)
+    adv = OrderingAdversary(m, minimize=minimize)
+    v = rng.random(m.n_states)
+    exact = worst_case_expectation if minimize else best_case_expectation
+    assert np.allclose(adv.lower_bound(v), exact(m, v), atol=1e-13)  # fresh order: exact
+    for _ in range(5):
+        v2 = rng.random(m.n_states)  # the stored order is now stale
+        assert np.all(adv.lower_bound(v2) <= exact(m, v2) + 1e-13)
+    assert np.any(adv.lower_bound(v2) < exact(m, v2) - 1e-6)

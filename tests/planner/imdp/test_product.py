@@ -49,6 +49,13 @@ def test_failure_nonviolating_and_satisfaction():
     assert (sat.values[q == 2] == 0).all() and (sat.values[q == 1] == 1).all()
     # every accepting component lives at q1
     assert all((q[ec.states] == 1).all() for ec in p.accepting_end_components())
+    # exploration candidates: end components of the nonviolating sub-model
+    for ec in p.end_components(sub.actions):
+        assert not fail[ec.states].any()
+        assert sub.actions[p.model.row_state[ec.rows], p.model.row_action[ec.rows]].all()
+    # at q0 every allowed hop may spill towards the goal (q1): no end component there
+    assert p.end_components(sub.actions)
+    assert not any((q[ec.states] == 0).any() for ec in p.end_components(sub.actions))
     strat = p.goal_strategy(allowed=sub.actions)
     for c in (1, 2, 3):
         a = strat[p.state_index(c, 0)]

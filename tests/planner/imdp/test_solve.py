@@ -96,6 +96,16 @@ def test_reach_matches_reference(zero_lower, sat):
         assert got.converged and got.residual < 1e-12
 
 
+def test_without_graph_precomputation_same_values():
+    rng = np.random.default_rng(13)
+    m = random_imdp(rng, n_states=25)
+    spec = Specification(ReachAvoid("goal", "bad"))
+    with_pre = solve(Problem(m, spec), ValueIteration(1e-12))
+    plain = solve(Problem(m, spec), ValueIteration(1e-12, precompute=False))
+    assert plain.values == pytest.approx(with_pre.values, abs=1e-9)
+    assert plain.iterations >= with_pre.iterations
+
+
 def test_min_reach_matches_reference():
     rng = np.random.default_rng(21)
     m = random_imdp(rng, n_states=15)
