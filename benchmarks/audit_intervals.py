@@ -53,20 +53,23 @@ def main() -> None:
         res = audit_intervals(
             runner.env, data, every, samples=args.samples, rng=rng, progress=bar.update
         )
+    r = res.result
     print(f"audit: {res.hops} hops, {res.failures} failed, {time.perf_counter() - t0:.1f} s")
     print(
-        f"triples within [lower - m, upper + m]: {res.passed.sum()}/{res.passed.size} = "
-        f"{res.fraction_passed:.4f} (target >= 0.99)"
+        f"triples within [lower - m, upper + m]: {r.fraction:.4f} of {r.num_triples} "
+        f"(m = {r.margin.max():.3f} at 99 %; target >= 0.99)"
     )
-    print("worst offenders: cell (i,j) action -> successor: freq [CI] vs [lower, upper]")
-    for k in res.worst(10):
-        i, j = grid.cell_ij(int(res.state[k]))
-        s = int(res.successor[k])
-        succ = "out" if s == grid.out else str(tuple(int(v) for v in grid.cell_ij(s)))
+    print("worst offenders: cell (i,j) action -> successor: freq vs [lower, upper]")
+    for o in r.offenders[:10]:
+        i, j = grid.cell_ij(o.state)
+        succ = (
+            "out"
+            if o.successor == grid.out
+            else str(tuple(int(v) for v in grid.cell_ij(o.successor)))
+        )
         print(
-            f"  ({int(i)},{int(j)}) {ACTIONS[res.action[k]]} -> {succ}: {res.freq[k]:.3f} "
-            f"[{res.ci_lo[k]:.3f}, {res.ci_hi[k]:.3f}] vs [{res.lower[k]:.3f}, {res.upper[k]:.3f}]"
-            f"{'' if res.passed[k] else '  FAIL'}"
+            f"  ({int(i)},{int(j)}) {ACTIONS[o.action]} -> {succ}: {o.frequency:.3f} vs "
+            f"[{o.lower:.3f}, {o.upper:.3f}] (outside by {o.excess:.3f})"
         )
 
 

@@ -12,10 +12,10 @@ Procedure (issue "learning", acceptance):
    computes the touchdown angles for the pair's target with the backup switch off (only that
    action is allowed), and the hops are simulated in one batch in MuJoCo with the world's
    terrain field, fresh landing noise and the stance thrust.
-4. For every (cell, action, successor) triple, the empirical frequency ``k / n`` of landing in
-   the successor passes when its 99 % Clopper-Pearson interval meets ``[lower, upper]``, i.e.
-   ``lower - m_lo <= k / n <= upper + m_hi`` with the binomial margins ``m`` of that interval.
-   Successors the intervals leave out have ``[0, 0]``. Failed hops are counted separately.
+4. For every (cell, action, successor) triple, the empirical frequency of landing in the
+   successor passes when it lies in ``[lower - m, upper + m]``, ``m`` the 99 % binomial margin
+   (:func:`planner.audit.audit_intervals`). Successors the intervals leave out have
+   ``[0, 0]``. Failed hops are counted separately, not as landings.
 
 The audit checks the abstraction *as used*: the GP models the error as a function of the
 departure position only, while the hop also depends on the incoming velocity; a mismatch
@@ -28,7 +28,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import beta as beta_dist
 
 from hopper_sim.batch import simulate_hops
 from hopper_sim.controller.simulator import nominal_energy
@@ -36,6 +35,8 @@ from hopper_sim.environment import HopperGridEnv
 from hopper_sim.events import HopEvent, Observer
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.runner import NavigationRunner, RunnerSettings
+from planner.audit import AuditResult
+from planner.audit import audit_intervals as audit
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.grid import ACTIONS
 from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
@@ -81,45 +82,15 @@ def collect_run_data(runner: NavigationRunner, seed: int) -> RunData:
 
 
 @dataclass(frozen=True)
-class AuditResult:
-    """Per audited triple (length T): ``state``, ``action``, ``successor``, ``lower``,
-    ``upper``, ``count`` (landings in the successor), ``n`` (successful hops of the pair),
-    ``freq``, the Clopper-Pearson bounds ``ci_lo``, ``ci_hi`` and ``passed``; ``failures``
-    counts failed hops over all pairs."""
+class SampledAudit:
+    """The audit of :func:`planner.audit.audit_intervals` on MuJoCo samples, the number of
+    failed hops (not counted as landings), the hops simulated, and the successor counts
+    ``(P, n_states)`` per audited pair."""
 
-    state: np.ndarray
-    action: np.ndarray
-    successor: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    count: np.ndarray
-    n: np.ndarray
-    freq: np.ndarray
-    ci_lo: np.ndarray
-    ci_hi: np.ndarray
-    passed: np.ndarray
+    result: AuditResult
     failures: int
     hops: int
-
-    @property
-    def fraction_passed(self) -> float:
-        return float(self.passed.mean()) if self.passed.size else 1.0
-
-    def worst(self, k: int = 10) -> np.ndarray:
-        """Indices of the ``k`` triples farthest outside their intervals."""
-        gap = np.maximum(self.ci_lo - self.upper, self.lower - self.ci_hi)
-        order = np.argsort(-gap)
-        return order[: min(k, gap.size)]
-
-
-def clopper_pearson(count: np.ndarray, n: np.ndarray, confidence: float = 0.99):
-    """Two-sided Clopper-Pearson interval of a binomial proportion, elementwise."""
-    a = 1.0 - confidence
-    count = np.asarray(count, dtype=float)
-    n = np.asarray(n, dtype=float)
-    lo = np.where(count > 0, beta_dist.ppf(a / 2, count, n - count + 1), 0.0)
-    hi = np.where(count < n, beta_dist.ppf(1 - a / 2, count + 1, n - count), 1.0)
-    return np.nan_to_num(lo), np.nan_to_num(hi, nan=1.0)
+    counts: np.ndarray
 
 
 def audit_intervals(
@@ -132,7 +103,7 @@ def audit_intervals(
     settings: RunnerSettings | None = None,
     confidence: float = 0.99,
     progress: Callable[[int], None] | None = None,
-) -> AuditResult:
+) -> SampledAudit:
     """Audit the intervals learned from ``data`` on ``pairs`` ((P, 2) cell, action ids)."""
     settings = settings or RunnerSettings()
     grid = env.grid
@@ -176,43 +147,10 @@ def audit_intervals(
         thrust=True,
         nominal_energy=nominal_energy(env.model, env.controller.steady.speed),
     )
-    landed = np.where(res.ok, grid.locate(np.nan_to_num(res.next_pos)), -1)
-    pair_id = np.repeat(np.arange(n_pairs), samples)
-    n_ok = np.bincount(pair_id[res.ok], minlength=n_pairs)
-
-    # every (pair, successor) seen or in the intervals
-    row_of = np.full(grid.enabled.shape, -1)
-    row_of[pairs[:, 0], pairs[:, 1]] = np.arange(n_pairs)
-    ti_row = row_of[ti.state, ti.action]
-    keep = ti_row >= 0
-    n_states = grid.n_states
-    key_iv = ti_row[keep] * n_states + ti.successor[keep]
-    key_seen = pair_id[res.ok] * n_states + landed[res.ok]
-    keys = np.union1d(key_iv, key_seen)
-    lower = np.zeros(keys.size)
-    upper = np.zeros(keys.size)
-    pos_iv = np.searchsorted(keys, key_iv)
-    lower[pos_iv] = ti.lower[keep]
-    upper[pos_iv] = ti.upper[keep]
-    count = np.zeros(keys.size)
-    np.add.at(count, np.searchsorted(keys, key_seen), 1.0)
-    row = keys // n_states
-    n = n_ok[row].astype(float)
-    freq = np.divide(count, n, out=np.zeros_like(count), where=n > 0)
-    ci_lo, ci_hi = clopper_pearson(count, n, confidence)
-    passed = (ci_hi >= lower) & (ci_lo <= upper)
-    return AuditResult(
-        state=pairs[row, 0],
-        action=pairs[row, 1],
-        successor=keys % n_states,
-        lower=lower,
-        upper=upper,
-        count=count,
-        n=n,
-        freq=freq,
-        ci_lo=ci_lo,
-        ci_hi=ci_hi,
-        passed=passed,
-        failures=int((~res.ok).sum()),
-        hops=int(cells.size),
-    )
+    landed = grid.locate(res.next_pos[res.ok])
+    pair_id = np.repeat(np.arange(n_pairs), samples)[res.ok]
+    counts = np.zeros((n_pairs, grid.n_states), dtype=np.int64)
+    np.add.at(counts, (pair_id, landed), 1)
+    sampled = counts.sum(axis=1) > 0
+    result = audit(ti, pairs[sampled, 0], pairs[sampled, 1], counts[sampled], confidence=confidence)
+    return SampledAudit(result, int((~res.ok).sum()), int(cells.size), counts)

@@ -163,6 +163,7 @@ class NavigationRunner:
         positions: list[np.ndarray],
         errors: list[np.ndarray],
         current: int | None,
+        previous: Resynthesis | None = None,
     ) -> Resynthesis:
         pos = np.asarray(positions, dtype=float).reshape(-1, 2)
         err = np.asarray(errors, dtype=float).reshape(-1, 2)
@@ -177,6 +178,7 @@ class NavigationRunner:
             initial_cell=int(self.grid.locate(np.asarray(self.scenario.start)[None])[0]),
             current_state=current,
             settings=self.synthesis_settings,
+            previous=previous,
             clock=self.clock,
         )
 
@@ -220,8 +222,9 @@ class NavigationRunner:
             for k, v in res.timings.items():
                 timings[k] = timings.get(k, 0.0) + v
             batch_max = max(batch_max, sum(res.timings.values()))
-            policy.rl = res.rl
-            policy.resynthesise(res.exploration, res.goal, res.satisfaction.values, res.fallback)
+            policy.resynthesise(
+                res.exploration, res.goal, res.satisfaction.values, res.fallback, rl=res.rl
+            )
             self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res))
 
         res = self._synthesise(gp, positions, errors, None)
@@ -298,7 +301,7 @@ class NavigationRunner:
             elif self.accepting_sink[q]:
                 outcome, reason = "success", "specification satisfied"
             elif steps % rp.batch_size == 0:
-                res = self._synthesise(gp, positions, errors, pstate)
+                res = self._synthesise(gp, positions, errors, pstate, res)
                 product = res.product
                 install(res, steps)
         timings["batch_max"] = batch_max
