@@ -292,7 +292,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         rows=free_rows,
         resort_tolerance=0.0 if reach else alg.tolerance * 1e-2,
     )
-    refresh = 8
+    refresh = 16
     v = fixed_val.copy()
     residual = 0.0
     it = 0
