@@ -14,8 +14,14 @@ Properties:
 
 ``satisfaction="pessimistic"``: the adversary opposes the strategy (the worst case);
 ``"optimistic"``: it helps. The stopping rule is ``max_s |V_k(s) - V_{k-1}(s)| < tolerance``
-(default 1e-8); the last such difference is the reported residual. For discounted reward
-the error is at most ``gamma / (1 - gamma) * residual``.
+(default 1e-8) for a sweep with the exact adversary; that difference is the reported
+residual. For discounted reward the error is at most ``gamma / (1 - gamma) * residual``;
+for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
+
+Reachability sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting) between order
+refreshes every 16 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay
+below the least fixed point, so zero lower bounds and end components stay safe; the last
+sweeps use the exact order.
 """
 
 from __future__ import annotations
