@@ -19,7 +19,7 @@ residual. For discounted reward the error is at most ``gamma / (1 - gamma) * res
 for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
 
 Reachability sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting) between order
-refreshes every 16 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay
+refreshes every 8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay
 below the least fixed point, so zero lower bounds and end components stay safe; the last
 sweeps use the exact order.
 """
@@ -298,7 +298,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         rows=free_rows,
         resort_tolerance=0.0 if reach else alg.tolerance * 1e-2,
     )
-    refresh = 16
+    refresh = 8
     v = fixed_val.copy()
     residual = 0.0
     it = 0
