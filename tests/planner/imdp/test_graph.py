@@ -1,5 +1,7 @@
 import numpy as np
+import pytest
 
+from planner.errors import SpecificationError
 from planner.imdp import IMDP, graph
 
 
@@ -113,10 +115,6 @@ def test_possible_and_positive_reach():
 
 
 def test_graph_argument_errors():
-    import pytest
-
-    from planner.errors import SpecificationError
-
     m = model(1, [(0, 0, [(0, 1, 1)])])
     with pytest.raises(SpecificationError, match="mode"):
         graph.maximal_end_components(m, mode="robust")
