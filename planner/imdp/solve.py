@@ -18,10 +18,11 @@ Properties:
 residual. For discounted reward the error is at most ``gamma / (1 - gamma) * residual``;
 for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
 
-Reachability sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting) between order
-refreshes every 8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay
-below the least fixed point, so zero lower bounds and end components stay safe; the last
-sweeps use the exact order.
+Reachability sweeps are Gauss-Seidel over layers of graph distance to the value-1 states
+and use :meth:`OrderingAdversary.lower_bound` (no sorting) between order refreshes every
+8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
+fixed point, so zero lower bounds and end components stay safe; the last sweeps use the
+exact order (see ``_reach_sweeps``).
 """
 
 from __future__ import annotations
