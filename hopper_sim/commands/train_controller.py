@@ -83,6 +83,11 @@ def run(args: argparse.Namespace) -> int:
         if args.save_data is not None:
             print(f"saved dataset to {save_dataset(dataset, args.save_data)}")
 
+    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
+    print(
+        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
+        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
+    )
     config = TrainConfig(hidden=tuple(int(h) for h in args.hidden.split(",")), epochs=args.epochs)
     t0 = time.perf_counter()
     with tqdm(total=config.epochs, desc="training", unit="epoch") as bar:
@@ -101,11 +106,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  feasibility accuracy {f['accuracy']:.4f}, failed hops called ok ", end="")
     print(f"{f['false_ok_rate']:.4f}")
 
-    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
-    print(
-        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
-        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
-    )
     metadata = {
         "seed": args.seed,
         "nominal_speed": args.nominal_speed,
