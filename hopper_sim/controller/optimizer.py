@@ -181,9 +181,10 @@ class LegAngleOptimizer:
             ang = best_x[pick]
             y, logit = self.net(self._inputs(speed, vz, ang))
             cost = self._cost(y, logit, ang, tgt, vd)
+        r = self.net.ranges  # float32 rounding may step just outside the float64 box
         return AngleSolution(
-            alpha=ang[:, 0].double().numpy(),
-            beta=ang[:, 1].double().numpy(),
+            alpha=np.clip(ang[:, 0].double().numpy(), *r.alpha),
+            beta=np.clip(ang[:, 1].double().numpy(), *r.beta),
             cost=cost.double().numpy(),
             displacement=y[:, :2].double().numpy(),
             velocity=y[:, 2:].double().numpy(),

@@ -14,10 +14,17 @@ equations:
   ``s' = s``, ``v_z' = v_z``.
 
 Solved by damped Newton iterations with central finite differences, each iteration one
-batched call of the hop map. The default nominal hop length is 1.5 m, the midpoint of the
-1- and 2-cell hops of the 1 m grid; for the exact SLIP of ``notes/libraries.md``
-(m = 80 kg, l0 = 1 m, k = 20 kN/m) that gait has V = 3.5 m/s, v_z = -0.681 m/s and
-alpha = 71.27 deg.
+batched call of the hop map. For the exact SLIP of ``notes/libraries.md`` (m = 80 kg,
+l0 = 1 m, k = 20 kN/m) 1.5 m hops at V = 3.5 m/s have v_z = -0.681 m/s and alpha = 71.27 deg
+(checked in the tests against the MuJoCo hop).
+
+Choice for the navigation (``hopnav train-controller`` defaults): V_nom = 4.0 m/s and
+v_des = the 2.0 m running gait at that speed (s = 3.776 m/s, v_z = -1.319 m/s,
+alpha = 70.0 deg). Measured: at 3.5 m/s the hopper reaches 1-cell targets in every direction
+but 2-cell targets beside or behind it miss by 0.4-0.5 m, so chained random actions drift
+into steep bouncing and the backup replaces nearly every 2-cell request; at 4.0 m/s 2-cell
+hops to the side become reachable. At 4.0 m/s there is no flat running gait of 1.5 m (only
+steep bouncing ones), hence the 2.0 m gait.
 """
 
 from __future__ import annotations
