@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("train_controller",)
+COMMAND_MODULES: tuple[str, ...] = ("hop", "train_controller")
 
 
 def build_parser() -> argparse.ArgumentParser:

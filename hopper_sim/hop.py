@@ -376,11 +376,11 @@ def simulate_hop(
         r = run(float(c[0]), False)
         return np.array([r.energy_after if r.ok else np.nan]), r
 
-    c, _ = thrust_law.regulate(
+    c, last = thrust_law.regulate(
         run_array,
         e_before,
         e_nom,
         thrust_law.integral_estimate(p, td.leg_rate),
         p.thrust_limit,
     )
-    return run(float(c[0]), record_path)
+    return run(float(c[0]), True) if record_path else last

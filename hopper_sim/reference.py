@@ -15,6 +15,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from hopper_sim import slip
+from hopper_sim.hop import MAX_STANCE_TIME
 from hopper_sim.model import SlipParams
 
 RTOL = 1e-12
@@ -48,7 +49,7 @@ def reference_hop(
     force: np.ndarray | None = None,
     noise: np.ndarray | None = None,
     thrust_command: float = 0.0,
-    max_stance_time: float = 2.0,
+    max_stance_time: float = MAX_STANCE_TIME,
 ) -> ReferenceHop:
     """One hop with the same conventions as :func:`hopper_sim.hop.simulate_hop`; ``force`` is
     the (constant) horizontal terrain force of this stance [N]."""

@@ -84,7 +84,9 @@ def touchdown(
     return Touchdown(time=t_td, com=com, vel=v, foot=foot, leg_rate=leg_rate)
 
 
-def leg_state(com: np.ndarray, vel: np.ndarray, foot: np.ndarray):
+def leg_state(
+    com: np.ndarray, vel: np.ndarray, foot: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Leg length l (N,), unit vector u (N, 3) from foot to CoM, and rate ldot (N,)."""
     d = com - foot
     length = np.sqrt(np.einsum("ij,ij->i", d, d))

@@ -50,6 +50,8 @@ class TerrainField:
         cls, seed: int, amplitude: float, lengthscale: float, features: int = 256
     ) -> TerrainField:
         """Draw the field with ``numpy.random.default_rng(seed)``."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise TerrainError(f"terrain seed must be a non-negative integer: {seed!r}")
         if not (np.isfinite(amplitude) and amplitude >= 0.0):
             raise TerrainError(f"terrain amplitude must be finite and >= 0 N: {amplitude}")
         if not (np.isfinite(lengthscale) and lengthscale > 0.0):
