@@ -58,8 +58,8 @@ class OptimizerConfig:
     refinement ``method`` ("newton": batched finite-difference Newton, the default; "adam":
     projected Adam through autograd with step size ``lr`` [rad])."""
 
-    grid_alpha: int = 24
-    grid_beta: int = 48
+    grid_alpha: int = 16
+    grid_beta: int = 32
     starts: int = 3
     steps: int = 5
     lr: float = 0.02
