@@ -111,6 +111,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{f['false_ok_rate']:.4f}")
 
     metadata = {
+        "command": (
+            f"hopnav train-controller --samples {len(dataset)} --seed {args.seed} "
+            f"--epochs {args.epochs} --hidden {args.hidden} "
+            f"--nominal-speed {args.nominal_speed} --hop-length {args.hop_length}"
+        ),
         "seed": args.seed,
         "nominal_speed": args.nominal_speed,
         "steady": steady.as_dict(),

@@ -56,7 +56,8 @@ class HopDecision:
     world velocity [m/s] of the next interstitial state; ``cost`` of the executed action;
     ``backup_used`` whether the executed action differs from the requested one;
     ``actions``/``costs``: every evaluated action and its best cost; ``p_ok``: predicted
-    success probability of the executed hop.
+    success probability of the executed hop; ``in_range``: whether the interstitial state lay
+    inside the network's training box (else it was clamped into it).
     """
 
     requested: int
@@ -70,6 +71,7 @@ class HopDecision:
     actions: tuple[int, ...]
     costs: np.ndarray
     p_ok: float
+    in_range: bool = True
 
 
 class LegAngleController:
@@ -108,9 +110,10 @@ class LegAngleController:
 
     def solve_all(
         self, position: np.ndarray, velocity: np.ndarray, targets: np.ndarray
-    ) -> tuple[AngleSolution, float]:
+    ) -> tuple[AngleSolution, float, bool]:
         """Best angles for each of ``targets`` (K, 2) [world m]; also returns the heading
-        ``psi`` [rad] of ``velocity``."""
+        ``psi`` [rad] of ``velocity`` and whether the state lay in the training box (a state
+        outside it is clamped into it for the network)."""
         pos = np.asarray(position, dtype=np.float64)
         vel = np.asarray(velocity, dtype=np.float64)
         tg = np.asarray(targets, dtype=np.float64)
@@ -134,10 +137,15 @@ class LegAngleController:
         v_des = np.concatenate(
             [self.steady.speed * unit, np.full((len(tg), 1), self.steady.vz)], axis=1
         )
+        r = self.optimizer.net.ranges
+        in_range = bool(r.speed[0] <= speed <= r.speed[1] and r.vz[0] <= vz <= r.vz[1])
         sol = self.optimizer.solve(
-            float(speed), float(vz), rotate_xy(disp, -psi), rotate_xy(v_des, -psi)
+            float(np.clip(speed, *r.speed)),
+            float(np.clip(vz, *r.vz)),
+            rotate_xy(disp, -psi),
+            rotate_xy(v_des, -psi),
         )
-        return sol, float(psi)
+        return sol, float(psi), in_range
 
     def decide(
         self,
@@ -156,7 +164,7 @@ class LegAngleController:
             raise ActionError(f"{len(acts)} actions but {len(np.asarray(targets))} targets")
         if requested not in acts:
             raise ActionError(f"requested action {requested} is not among the allowed {acts}")
-        sol, psi = self.solve_all(position, velocity, targets)
+        sol, psi, in_range = self.solve_all(position, velocity, targets)
         req = acts.index(requested)
         pick = req if sol.cost[req] <= self.backup_threshold else int(np.argmin(sol.cost))
         landing = np.asarray(position, dtype=np.float64) + rotate_xy(sol.displacement[pick], psi)
@@ -172,4 +180,5 @@ class LegAngleController:
             actions=acts,
             costs=sol.cost,
             p_ok=float(sol.p_ok[pick]),
+            in_range=in_range,
         )
