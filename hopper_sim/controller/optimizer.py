@@ -9,9 +9,9 @@ and ``K`` candidate targets at once, find per target
 
 where ``(d, v, l) = NN(s, v_z, a, b)`` are the predicted displacement [m], next interstitial
 velocity [m/s] and feasibility logit, ``Bound`` is the paper's distance [rad] outside the
-training box of (alpha, beta), and the last term is a hinge that keeps the solution inside
+training box of (alpha, beta), and the fourth term is a hinge that keeps the solution inside
 the region the classifier is confident about (logit margin ``m``; ``m = 3`` means predicted
-success probability >= 0.95). The last term is an apex margin (next-hop feasibility): it
+success probability >= 0.95). The fifth term is an apex margin (next-hop feasibility): it
 asks the next interstitial state to descend at ``|v_z'| >= v_min``, i.e. the next flight to
 peak at least ``v_min^2 / (2 g)`` above ``l0``. A stance under terrain forces loses energy
 the thrust may not restore, and a hop whose flight then no longer reaches ``l0`` fails;
