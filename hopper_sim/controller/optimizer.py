@@ -15,9 +15,10 @@ success probability >= 0.95). The fifth term is an apex margin (next-hop feasibi
 asks the next interstitial state to descend at ``|v_z'| >= v_min``, i.e. the next flight to
 peak at least ``v_min^2 / (2 g)`` above ``l0``. A stance under terrain forces loses energy
 the thrust may not restore, and a hop whose flight then no longer reaches ``l0`` fails;
-measured over chained MuJoCo hops with the default terrain field and noise: without the
-margin 6 of 250 hops failed, with ``v_min = 1.8`` m/s 1 of 250, with ``v_min = 2.2`` m/s
-(0.25 m reserve, the default) 0 of 1,000, while the unperturbed landing error stayed the same.
+measured with the shipped checkpoint over 500 chained MuJoCo hops with the default terrain
+field (seed 0) and noise: without the margin 30 hops failed, with ``v_min = 2.2`` m/s (0.25 m
+reserve, the default) none (and none in 3 x 1,000 hops, terrain seeds 0-2), while the
+unperturbed landing error stayed the same (median 0.015 m both ways).
 Norms are smoothed as ``sqrt(|x|^2 + eps^2)``.
 
 Method (vectorised over targets and starts, one decision = a few forward passes):
