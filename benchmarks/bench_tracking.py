@@ -69,6 +69,7 @@ def main() -> None:
     print(row("model", res.model_error, "   |actual - predicted landing|"))
     print(f"  backups used: {int(res.backup.sum())} of {args.hops} hops")
     print(f"  hop failures: {int((~res.ok).sum())}")
+    print(f"  states outside the training box (clamped): {int((~res.in_range).sum())}")
     lat = 1e3 * res.latency
     print(
         f"  decision latency: median {np.median(lat):.2f} ms, p95 {np.percentile(lat, 95):.2f} ms"

@@ -19,15 +19,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "nominal speed), trains the MLP, computes the steady gait v_des, saves."
         ),
     )
-    p.add_argument("--samples", type=int, default=100_000, help="hops to simulate")
+    p.add_argument("--samples", type=int, default=60_000, help="hops to simulate")
     p.add_argument("--seed", type=int, default=0, help="seed of sampling, split and training")
     p.add_argument("--data", type=Path, help="train on this saved dataset instead of simulating")
     p.add_argument("--save-data", type=Path, help="also save the simulated dataset (.npz)")
     p.add_argument("--out", type=Path, default=DEFAULT_CHECKPOINT, help="checkpoint path")
     p.add_argument("--epochs", type=int, default=120)
     p.add_argument("--hidden", type=str, default="128,128,128", help="layer widths")
-    p.add_argument("--nominal-speed", type=float, default=3.5, help="V_nom [m/s]")
-    p.add_argument("--hop-length", type=float, default=1.5, help="steady hop length [m]")
+    p.add_argument(
+        "--nominal-speed", type=float, default=4.0, help="interstitial speed V_nom [m/s]"
+    )
+    p.add_argument(
+        "--hop-length", type=float, default=2.0, help="hop length of the steady gait v_des [m]"
+    )
     p.add_argument("--nthread", type=int, default=None, help="simulation threads")
     p.add_argument("--torch-threads", type=int, default=1)
     p.set_defaults(func=run)
@@ -83,6 +87,11 @@ def run(args: argparse.Namespace) -> int:
         if args.save_data is not None:
             print(f"saved dataset to {save_dataset(dataset, args.save_data)}")
 
+    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
+    print(
+        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
+        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
+    )
     config = TrainConfig(hidden=tuple(int(h) for h in args.hidden.split(",")), epochs=args.epochs)
     t0 = time.perf_counter()
     with tqdm(total=config.epochs, desc="training", unit="epoch") as bar:
@@ -101,12 +110,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"  feasibility accuracy {f['accuracy']:.4f}, failed hops called ok ", end="")
     print(f"{f['false_ok_rate']:.4f}")
 
-    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
-    print(
-        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
-        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
-    )
     metadata = {
+        "command": (
+            f"hopnav train-controller --samples {len(dataset)} --seed {args.seed} "
+            f"--epochs {args.epochs} --hidden {args.hidden} "
+            f"--nominal-speed {args.nominal_speed} --hop-length {args.hop_length}"
+        ),
         "seed": args.seed,
         "nominal_speed": args.nominal_speed,
         "steady": steady.as_dict(),

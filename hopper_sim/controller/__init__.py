@@ -16,6 +16,7 @@ from hopper_sim.controller.controller import HopDecision, LegAngleController
 from hopper_sim.controller.dataset import (
     HopDataset,
     HopSamples,
+    Sampling,
     generate_dataset,
     load_dataset,
     save_dataset,
@@ -37,6 +38,7 @@ __all__ = [
     "LegAngleController",
     "LegAngleOptimizer",
     "OptimizerConfig",
+    "Sampling",
     "SteadyState",
     "TrainConfig",
     "generate_dataset",

@@ -19,9 +19,12 @@ horizontal vector from the position to the target) the controller asks for
 This is the paper's ``||v - v_des||`` with ``v_des`` turned to the commanded direction: it
 rewards landing ready for the next hop in that direction and penalises a change of speed.
 
-The cost is in "metres of landing error" (``c1 = 1``); the default threshold 0.25 thus
-switches when the requested action is predicted to miss by about 0.25 m, or to land far from
-steady hopping (0.25 / c2 m/s), or too near the region where hops fail.
+The cost is in "metres of landing error" (``c1 = 1``); the default threshold 0.3 thus
+switches when the requested action is predicted to miss by about 0.3 m, or to land far from
+steady hopping (0.3 / c2 m/s), too near the region where hops fail, or without apex margin.
+Measured with the shipped checkpoint (``benchmarks/bench_tracking.py``, 1,000 chained MuJoCo
+hops, random requests, perturbations off, seed 0): 60 backups, all 8 actions executed,
+landing error median 0.015 m, p95 0.086 m, no failed hop.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from hopper_sim.controller.optimizer import (
 )
 from hopper_sim.controller.steady import SteadyState
 
-DEFAULT_BACKUP_THRESHOLD = 0.25
+DEFAULT_BACKUP_THRESHOLD = 0.3
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,8 @@ class HopDecision:
     world velocity [m/s] of the next interstitial state; ``cost`` of the executed action;
     ``backup_used`` whether the executed action differs from the requested one;
     ``actions``/``costs``: every evaluated action and its best cost; ``p_ok``: predicted
-    success probability of the executed hop.
+    success probability of the executed hop; ``in_range``: whether the interstitial state lay
+    inside the network's training box (else it was clamped into it).
     """
 
     requested: int
@@ -68,6 +72,7 @@ class HopDecision:
     actions: tuple[int, ...]
     costs: np.ndarray
     p_ok: float
+    in_range: bool = True
 
 
 class LegAngleController:
@@ -106,9 +111,10 @@ class LegAngleController:
 
     def solve_all(
         self, position: np.ndarray, velocity: np.ndarray, targets: np.ndarray
-    ) -> tuple[AngleSolution, float]:
+    ) -> tuple[AngleSolution, float, bool]:
         """Best angles for each of ``targets`` (K, 2) [world m]; also returns the heading
-        ``psi`` [rad] of ``velocity``."""
+        ``psi`` [rad] of ``velocity`` and whether the state lay in the training box (a state
+        outside it is clamped into it for the network)."""
         pos = np.asarray(position, dtype=np.float64)
         vel = np.asarray(velocity, dtype=np.float64)
         tg = np.asarray(targets, dtype=np.float64)
@@ -132,10 +138,15 @@ class LegAngleController:
         v_des = np.concatenate(
             [self.steady.speed * unit, np.full((len(tg), 1), self.steady.vz)], axis=1
         )
+        r = self.optimizer.net.ranges
+        in_range = bool(r.speed[0] <= speed <= r.speed[1] and r.vz[0] <= vz <= r.vz[1])
         sol = self.optimizer.solve(
-            float(speed), float(vz), rotate_xy(disp, -psi), rotate_xy(v_des, -psi)
+            float(np.clip(speed, *r.speed)),
+            float(np.clip(vz, *r.vz)),
+            rotate_xy(disp, -psi),
+            rotate_xy(v_des, -psi),
         )
-        return sol, float(psi)
+        return sol, float(psi), in_range
 
     def decide(
         self,
@@ -154,7 +165,7 @@ class LegAngleController:
             raise ActionError(f"{len(acts)} actions but {len(np.asarray(targets))} targets")
         if requested not in acts:
             raise ActionError(f"requested action {requested} is not among the allowed {acts}")
-        sol, psi = self.solve_all(position, velocity, targets)
+        sol, psi, in_range = self.solve_all(position, velocity, targets)
         req = acts.index(requested)
         pick = req if sol.cost[req] <= self.backup_threshold else int(np.argmin(sol.cost))
         landing = np.asarray(position, dtype=np.float64) + rotate_xy(sol.displacement[pick], psi)
@@ -170,4 +181,5 @@ class LegAngleController:
             actions=acts,
             costs=sol.cost,
             p_ok=float(sol.p_ok[pick]),
+            in_range=in_range,
         )

@@ -112,7 +112,7 @@ class Sampling:
     shell_speed: float | None = None
     shell_fraction: float = 0.8
     shell_width: float = 0.03
-    gamma_max: float = 1.35
+    gamma_max: float = 1.5
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.shell_fraction <= 1.0:

@@ -42,12 +42,13 @@ class InputRanges:
     """Box of the training inputs: interstitial horizontal speed [m/s], vertical velocity
     [m/s], leg elevation alpha [rad] and azimuth beta [rad] (relative to the heading).
 
-    The default horizontal speeds [0.5, 8] m/s cover the issue's [1, 8] m/s and the steep
-    descents (|v| = 3.5 m/s, descent angle up to 1.35 rad) that turning hops produce.
+    The default box, horizontal speed [0.25, 8] m/s and v_z [-4.5, 0] m/s, covers the issue's
+    [1, 8] m/s and the steep descents (|v| = 4 m/s, descent angle up to 1.5 rad) that
+    turning hops and the apex margin of the optimiser produce.
     """
 
-    speed: tuple[float, float] = (0.5, 8.0)
-    vz: tuple[float, float] = (-3.5, 0.0)
+    speed: tuple[float, float] = (0.25, 8.0)
+    vz: tuple[float, float] = (-4.5, 0.0)
     alpha: tuple[float, float] = (float(np.pi / 4), float(np.pi / 2))
     beta: tuple[float, float] = (float(-np.pi / 2), float(np.pi / 2))
 

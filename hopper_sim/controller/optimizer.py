@@ -5,12 +5,21 @@ and ``K`` candidate targets at once, find per target
 
     (alpha*, beta*) = argmin  c1 ||d(a, b) - d_des||  +  c2 ||v(a, b) - v_des||
                              + c3 Bound(a, b)  +  c4 max(0, m - l(a, b))
+                             + c5 max(0, v_min + v_z'(a, b))
 
 where ``(d, v, l) = NN(s, v_z, a, b)`` are the predicted displacement [m], next interstitial
 velocity [m/s] and feasibility logit, ``Bound`` is the paper's distance [rad] outside the
-training box of (alpha, beta), and the last term is a hinge that keeps the solution inside
+training box of (alpha, beta), and the fourth term is a hinge that keeps the solution inside
 the region the classifier is confident about (logit margin ``m``; ``m = 3`` means predicted
-success probability >= 0.95). Norms are smoothed as ``sqrt(|x|^2 + eps^2)``.
+success probability >= 0.95). The fifth term is an apex margin (next-hop feasibility): it
+asks the next interstitial state to descend at ``|v_z'| >= v_min``, i.e. the next flight to
+peak at least ``v_min^2 / (2 g)`` above ``l0``. A stance under terrain forces loses energy
+the thrust may not restore, and a hop whose flight then no longer reaches ``l0`` fails;
+measured with the shipped checkpoint over 500 chained MuJoCo hops with the default terrain
+field (seed 0) and noise: without the margin 30 hops failed, with ``v_min = 2.2`` m/s (0.25 m
+reserve, the default) none (and none in 3 x 1,000 hops, terrain seeds 0-2), while the
+unperturbed landing error stayed the same (median 0.015 m both ways).
+Norms are smoothed as ``sqrt(|x|^2 + eps^2)``.
 
 Method (vectorised over targets and starts, one decision = a few forward passes):
 
@@ -42,13 +51,16 @@ from hopper_sim.controller.hop_model import HopNet
 class CostWeights:
     """Weights of the leg-angle cost: ``c1`` per metre of landing error, ``c2`` per m/s of
     velocity error, ``c3`` per radian outside the training box (``c3 >> c1, c2`` as in the
-    paper), ``c4`` per unit of feasibility logit below ``margin``."""
+    paper), ``c4`` per unit of feasibility logit below ``margin``, ``c5`` per m/s that the
+    next vertical speed falls short of ``vz_min`` (apex margin; ``c5 = 0`` disables it)."""
 
     c1: float = 1.0
     c2: float = 0.05
     c3: float = 100.0
     c4: float = 1.0
     margin: float = 3.0
+    c5: float = 1.0
+    vz_min: float = 2.2
     eps: float = 1e-3
 
 
@@ -58,8 +70,8 @@ class OptimizerConfig:
     refinement ``method`` ("newton": batched finite-difference Newton, the default; "adam":
     projected Adam through autograd with step size ``lr`` [rad])."""
 
-    grid_alpha: int = 24
-    grid_beta: int = 48
+    grid_alpha: int = 16
+    grid_beta: int = 32
     starts: int = 3
     steps: int = 5
     lr: float = 0.02
@@ -129,7 +141,10 @@ class LegAngleOptimizer:
             torch.clamp(angles - self.upper, min=0) + torch.clamp(self.lower - angles, min=0)
         ).sum(-1)
         feas = torch.clamp(w.margin - logit, min=0)
-        return w.c1 * d_err + w.c2 * v_err + w.c3 * bound + w.c4 * feas
+        cost = w.c1 * d_err + w.c2 * v_err + w.c3 * bound + w.c4 * feas
+        if w.c5 > 0:
+            cost = cost + w.c5 * torch.clamp(w.vz_min + y[..., 4], min=0)
+        return cost
 
     def cost(
         self,
@@ -181,9 +196,10 @@ class LegAngleOptimizer:
             ang = best_x[pick]
             y, logit = self.net(self._inputs(speed, vz, ang))
             cost = self._cost(y, logit, ang, tgt, vd)
+        r = self.net.ranges  # float32 rounding may step just outside the float64 box
         return AngleSolution(
-            alpha=ang[:, 0].double().numpy(),
-            beta=ang[:, 1].double().numpy(),
+            alpha=np.clip(ang[:, 0].double().numpy(), *r.alpha),
+            beta=np.clip(ang[:, 1].double().numpy(), *r.beta),
             cost=cost.double().numpy(),
             displacement=y[:, :2].double().numpy(),
             velocity=y[:, 2:].double().numpy(),

@@ -14,10 +14,17 @@ equations:
   ``s' = s``, ``v_z' = v_z``.
 
 Solved by damped Newton iterations with central finite differences, each iteration one
-batched call of the hop map. The default nominal hop length is 1.5 m, the midpoint of the
-1- and 2-cell hops of the 1 m grid; for the exact SLIP of ``notes/libraries.md``
-(m = 80 kg, l0 = 1 m, k = 20 kN/m) that gait has V = 3.5 m/s, v_z = -0.681 m/s and
-alpha = 71.27 deg.
+batched call of the hop map. For the exact SLIP of ``notes/libraries.md`` (m = 80 kg,
+l0 = 1 m, k = 20 kN/m) 1.5 m hops at V = 3.5 m/s have v_z = -0.681 m/s and alpha = 71.27 deg
+(checked in the tests against the MuJoCo hop).
+
+Choice for the navigation (``hopnav train-controller`` defaults): V_nom = 4.0 m/s and
+v_des = the 2.0 m running gait at that speed (s = 3.776 m/s, v_z = -1.319 m/s,
+alpha = 70.0 deg). Measured: at 3.5 m/s the hopper reaches 1-cell targets in every direction
+but 2-cell targets beside or behind it miss by 0.4-0.5 m, so chained random actions drift
+into steep bouncing and the backup replaces nearly every 2-cell request; at 4.0 m/s 2-cell
+hops to the side become reachable. At 4.0 m/s there is no flat running gait of 1.5 m (only
+steep bouncing ones), hence the 2.0 m gait.
 """
 
 from __future__ import annotations
@@ -71,7 +78,16 @@ def _unpack(p: np.ndarray, total_speed: float | None) -> tuple[np.ndarray, ...]:
 def _residuals(
     hop_fn: BatchHopFn, p: np.ndarray, hop_length: float, total_speed: float | None
 ) -> np.ndarray:
+    """Fixed-point residuals per row of ``p``; NaN rows where the hop fails or the
+    parameters leave the valid set (v_z <= 0, |v_z| <= V, 0 < alpha <= pi/2)."""
     s, vz, alpha = _unpack(p, total_speed)
+    valid = (vz <= 0) & (alpha > 0) & (alpha <= np.pi / 2) & (s >= 0)
+    if total_speed is not None:
+        valid &= np.abs(vz) <= total_speed
+    out = np.full((len(p), 2 if total_speed is not None else 3), np.nan)
+    if not valid.any():
+        return out
+    s, vz, alpha = s[valid], vz[valid], alpha[valid]
     res = hop_fn(np.stack([s, np.zeros_like(s), vz], axis=1), alpha, np.zeros_like(alpha))
     ok = np.asarray(res.ok, dtype=bool)
     d = np.asarray(res.displacement)
@@ -79,9 +95,28 @@ def _residuals(
     r = [d[:, 0] - hop_length, v[:, 2] - vz]
     if total_speed is None:
         r.insert(1, np.hypot(v[:, 0], v[:, 1]) - s)
-    out = np.stack(r, axis=1)
-    out[~ok] = np.nan
+    r = np.stack(r, axis=1)
+    r[~ok] = np.nan
+    out[valid] = r
     return out
+
+
+def _scan(
+    hop_fn: BatchHopFn, hop_length: float, total_speed: float | None, starts: int
+) -> list[tuple[float, float, float]]:
+    v = 4.0 if total_speed is None else total_speed
+    vz, alpha = np.meshgrid(
+        np.linspace(-0.9 * v, -0.05 * v, 24), np.linspace(1.0, 1.5, 26), indexing="ij"
+    )
+    vz, alpha = vz.ravel(), alpha.ravel()
+    s = np.sqrt(v**2 - vz**2)
+    p = np.stack([s, vz, alpha], axis=1)
+    r = _residuals(hop_fn, p if total_speed is None else p[:, 1:], hop_length, total_speed)
+    norm = np.where(np.all(np.isfinite(r), axis=1), np.abs(r).max(axis=1), np.inf)
+    if not np.isfinite(norm).any():
+        raise SteadyStateError(f"every hop of the initial scan failed (|v| = {v} m/s)")
+    best = np.argsort(norm)[:starts]
+    return [(float(s[i]), float(vz[i]), float(alpha[i])) for i in best if np.isfinite(norm[i])]
 
 
 def steady_state(
@@ -89,17 +124,46 @@ def steady_state(
     hop_length: float = NOMINAL_HOP_LENGTH,
     *,
     total_speed: float | None = None,
-    guess: tuple[float, float, float] = (3.42, -0.68, 1.244),
+    guess: tuple[float, float, float] | None = None,
     tol: float = 1e-6,
     max_iter: int = 40,
     step: float = 1e-5,
+    starts: int = 12,
 ) -> SteadyState:
     """Fixed point of ``hop_fn`` for ``hop_length`` metres per hop.
 
     ``guess`` is ``(s, v_z, alpha)``; with ``total_speed`` given its ``s`` is ignored.
     Raises :class:`SteadyStateError` if a hop near the iterate fails or the residual does
     not fall below ``tol`` within ``max_iter`` iterations.
+
+    Without a guess, one batched call scans a grid (``v_z`` in [-0.9 V, -0.05 V] with
+    ``V = total_speed`` or 4 m/s, alpha in [1.0, 1.5] rad, ``s = sqrt(V^2 - v_z^2)``), Newton
+    starts from the ``starts`` points of least residual, and of the fixed points found the
+    one with the largest horizontal speed is returned: a hop length has several fixed points
+    at one energy (a flat running gait and steep bouncing ones); v_des is the running gait.
     """
+    if guess is not None:
+        return _newton(hop_fn, hop_length, total_speed, guess, tol, max_iter, step)
+    found, errors = [], []
+    for g in _scan(hop_fn, hop_length, total_speed, starts):
+        try:
+            found.append(_newton(hop_fn, hop_length, total_speed, g, tol, max_iter, step))
+        except SteadyStateError as exc:
+            errors.append(str(exc))
+    if not found:
+        raise SteadyStateError(f"no start of the scan converged: {'; '.join(errors)}")
+    return max(found, key=lambda st: st.speed)
+
+
+def _newton(
+    hop_fn: BatchHopFn,
+    hop_length: float,
+    total_speed: float | None,
+    guess: tuple[float, float, float],
+    tol: float,
+    max_iter: int,
+    step: float,
+) -> SteadyState:
     p = np.array(guess[1:] if total_speed is not None else guess, dtype=np.float64)
     n = p.size
     eye = np.eye(n) * step

@@ -33,7 +33,7 @@ ACTION_OFFSETS = np.array(
 class ChainResult:
     """Per hop (length N): requested and executed action ids, backup used, hop succeeded,
     landing error [m] (NaN for failed hops), predicted landing error of the model [m], and
-    the decision latency [s]."""
+    the decision latency [s]; ``in_range``: the state lay in the network's training box."""
 
     requested: np.ndarray
     executed: np.ndarray
@@ -42,6 +42,7 @@ class ChainResult:
     error: np.ndarray
     model_error: np.ndarray
     latency: np.ndarray
+    in_range: np.ndarray
 
 
 def track_random_actions(
@@ -69,6 +70,7 @@ def track_random_actions(
     exe = np.zeros(n_hops, dtype=int)
     backup = np.zeros(n_hops, dtype=bool)
     ok = np.zeros(n_hops, dtype=bool)
+    in_range = np.zeros(n_hops, dtype=bool)
     for k in range(n_hops):
         req[k] = int(rng.integers(len(ACTION_NAMES)))
         targets = (np.floor(pos / cell) + 0.5 + ACTION_OFFSETS) * cell
@@ -89,7 +91,7 @@ def track_random_actions(
             record_path=False,
             data=data,
         )
-        exe[k], backup[k], ok[k] = d.executed, d.backup_used, r.ok
+        exe[k], backup[k], ok[k], in_range[k] = d.executed, d.backup_used, r.ok, d.in_range
         if r.ok:
             out["error"][k] = np.linalg.norm(r.next_pos - targets[d.executed])
             out["model_error"][k] = np.linalg.norm(r.next_pos - d.predicted_landing)
@@ -99,4 +101,6 @@ def track_random_actions(
             vel = controller.steady.velocity.copy()
         if progress is not None:
             progress(1)
-    return ChainResult(req, exe, backup, ok, out["error"], out["model_error"], out["latency"])
+    return ChainResult(
+        req, exe, backup, ok, out["error"], out["model_error"], out["latency"], in_range
+    )

@@ -9,6 +9,7 @@ from hopper_sim.controller.errors import ActionError, CheckpointCorruptError, In
 from hopper_sim.controller.hop_model import rotate_xy
 from hopper_sim.controller.steady import steady_state
 
+from .conftest import STANDIN_WEIGHTS
 from .standin import standin_hop
 
 # N1, N2, E1, E2, S1, S2, W1, W2 (DESIGN.md order)
@@ -17,7 +18,7 @@ OFFSETS = np.array([[0, 1], [0, 2], [1, 0], [2, 0], [0, -1], [0, -2], [-1, 0], [
 
 @pytest.fixture(scope="module")
 def controller(trained):
-    return LegAngleController(trained.net, steady_state(standin_hop, 1.5))
+    return LegAngleController(trained.net, steady_state(standin_hop, 1.5), weights=STANDIN_WEIGHTS)
 
 
 def _hop(vel, d):

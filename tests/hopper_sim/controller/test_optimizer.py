@@ -6,6 +6,7 @@ import pytest
 from hopper_sim.controller.errors import InputShapeError
 from hopper_sim.controller.optimizer import CostWeights, LegAngleOptimizer, OptimizerConfig
 
+from .conftest import STANDIN_WEIGHTS as W
 from .standin import failed, standin_hop
 
 
@@ -18,7 +19,7 @@ def _hop(speed, vz, alpha, beta):
 @pytest.mark.parametrize("method", ["newton", "adam"])
 def test_reaches_targets_through_the_true_map(trained, method):
     cfg = OptimizerConfig(method=method, steps=5 if method == "newton" else 15)
-    opt = LegAngleOptimizer(trained.net, config=cfg)
+    opt = LegAngleOptimizer(trained.net, W, cfg)
     targets = np.array([[1.0, 0.0], [2.0, 0.0], [1.0, 0.6], [1.5, -0.8], [0.7, 0.0]])
     v_des = np.tile([3.5, 0.0, -0.6], (len(targets), 1))
     sol = opt.solve(3.5, -0.6, targets, v_des)
@@ -37,10 +38,10 @@ def test_reaches_targets_through_the_true_map(trained, method):
 def test_refinement_improves_on_the_grid(trained):
     targets = np.array([[1.23, 0.17], [1.81, -0.31]])
     v_des = np.tile([3.5, 0.0, -0.6], (2, 1))
-    coarse = LegAngleOptimizer(trained.net, config=OptimizerConfig(steps=0)).solve(
+    coarse = LegAngleOptimizer(trained.net, W, OptimizerConfig(steps=0)).solve(
         3.5, -0.6, targets, v_des
     )
-    fine = LegAngleOptimizer(trained.net).solve(3.5, -0.6, targets, v_des)
+    fine = LegAngleOptimizer(trained.net, W).solve(3.5, -0.6, targets, v_des)
     assert np.all(fine.cost <= coarse.cost + 1e-6)
     assert fine.cost.sum() < coarse.cost.sum()
 
@@ -50,9 +51,9 @@ def test_avoids_the_infeasible_region(trained):
     # Without the feasibility term the optimiser goes there; with it, it stays out.
     target = np.array([[1.0, 1.73]])
     v_des = np.array([[3.5, 0.0, -0.6]])
-    free = CostWeights(c4=0.0)
+    free = CostWeights(c4=0.0, c5=0.0)
     sol_free = LegAngleOptimizer(trained.net, weights=free).solve(3.5, -0.6, target, v_des)
-    sol = LegAngleOptimizer(trained.net).solve(3.5, -0.6, target, v_des)
+    sol = LegAngleOptimizer(trained.net, W).solve(3.5, -0.6, target, v_des)
     assert failed(sol_free.alpha, sol_free.beta).all()
     assert not failed(sol.alpha, sol.beta).any()
     assert sol.p_ok[0] > 0.9
@@ -60,7 +61,7 @@ def test_avoids_the_infeasible_region(trained):
 
 
 def test_is_deterministic_and_validates(trained):
-    opt = LegAngleOptimizer(trained.net)
+    opt = LegAngleOptimizer(trained.net, W)
     t = np.array([[1.0, 0.2]])
     v = np.array([[3.5, 0.0, -0.6]])
     a, b = opt.solve(3.5, -0.6, t, v), opt.solve(3.5, -0.6, t, v)
@@ -71,3 +72,22 @@ def test_is_deterministic_and_validates(trained):
         opt.solve(float("nan"), -0.6, t, v)
     with pytest.raises(InputShapeError, match="method"):
         OptimizerConfig(method="bfgs")
+
+
+def test_apex_margin_steepens_the_next_descent(trained):
+    # stand-in: v_z' = -0.7 + 0.3 (v_z + 0.7) - 0.5 (alpha - 1.2); a short hop has a large
+    # alpha and a steep next descent already, so ask for a long one (small alpha)
+    target = np.array([[1.9, 0.0]])
+    v_des = np.array([[3.5, 0.0, -0.6]])
+    plain = LegAngleOptimizer(trained.net, W).solve(3.5, -0.6, target, v_des)
+    # with two angles and a 2-D landing target there is no freedom left: the margin changes
+    # the solution only when it outweighs the landing error (here 0.5 m/s of v_z' per
+    # 2.6 m of reach per radian of alpha)
+    weak = CostWeights(c5=1.0, vz_min=0.75)
+    strong = CostWeights(c5=10.0, vz_min=0.75)
+    same = LegAngleOptimizer(trained.net, weak).solve(3.5, -0.6, target, v_des)
+    steep = LegAngleOptimizer(trained.net, strong).solve(3.5, -0.6, target, v_des)
+    assert plain.velocity[0, 2] > -0.7
+    assert same.velocity[0, 2] == pytest.approx(plain.velocity[0, 2], abs=0.01)
+    assert steep.velocity[0, 2] < plain.velocity[0, 2] - 0.05
+    assert np.linalg.norm(steep.displacement - target) > np.linalg.norm(plain.displacement - target)
