@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "imdp")
+COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "imdp", "train_controller")
 
 
 def build_parser() -> argparse.ArgumentParser:
