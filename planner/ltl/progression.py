@@ -166,7 +166,9 @@ class Progression:
         return " | ".join(terms)
 
 
-def explore(prog: Progression, start: frozenset[int]) -> tuple[list[frozenset[int]], list[list[int]]]:
+def explore(
+    prog: Progression, start: frozenset[int]
+) -> tuple[list[frozenset[int]], list[list[int]]]:
     """All DNFs reachable from ``start`` by ``af``; returns (states, successor table)."""
     n_letters = 1 << len(prog.propositions)
     index = {start: 0}

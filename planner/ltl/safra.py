@@ -160,3 +160,135 @@ def _text(tree: Node | None, marks: int) -> str:
         return f"{name}{flag}{{{states}}}" + (f"[{inner}]" if inner else "")
 
     return go(tree)
+
+
+def determinise_parity(
+    n_letters: int, initial: int, succ: list[list[int]], succ_acc: list[list[int]]
+) -> SafraResult:
+    """Determinise with Piterman's compact Safra trees (dynamic renaming) to parity.
+
+    Piterman, "From nondeterministic Büchi and Streett automata to deterministic parity
+    automata", LMCS 3(3), 2007. Names are ``1..k`` in order of age; after each step the
+    surviving nodes are renamed ``1..k'`` preserving their order. With ``e`` the smallest
+    name of an old node removed in the step and ``f`` the smallest name of a marked node,
+    the step has priority ``2e - 1`` if ``e < f``, ``2f`` if ``f < e`` and ``2n + 1`` if
+    neither exists; a run is accepted iff the least priority seen infinitely often is even.
+    The priority is stored in the successor state, so that the condition is state-based:
+    for every even ``2i`` the Rabin pair ``(G, B)`` has ``G`` the states entered with
+    priority ``2i`` and ``B`` those entered with a smaller priority.
+    """
+    delta_cache: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def delta(label: int, a: int) -> tuple[int, int]:
+        key = (label, a)
+        hit = delta_cache.get(key)
+        if hit is not None:
+            return hit
+        out = out_acc = 0
+        rest = label
+        while rest:
+            low = rest & -rest
+            q = low.bit_length() - 1
+            out |= succ[q][a]
+            out_acc |= succ_acc[q][a]
+            rest ^= low
+        delta_cache[key] = (out, out_acc)
+        return out, out_acc
+
+    n_nba = max(len(succ), 1)
+    top = 2 * n_nba + 1
+
+    def count(node: Node) -> int:
+        return 1 + sum(count(c) for c in node[2])
+
+    def step(tree: Node | None, a: int) -> tuple[Node | None, int]:
+        if tree is None:
+            return None, top
+        n_old = count(tree)
+        fresh = n_old
+
+        def grow(node: Node) -> Node:
+            nonlocal fresh
+            name, label, children = node
+            new_label, new_acc = delta(label, a)
+            kids = [grow(c) for c in children]
+            if new_acc:
+                fresh += 1
+                kids.append((fresh, new_acc, ()))
+            return (name, new_label, tuple(kids))
+
+        marked = top
+        removed = top
+        survivors: list[int] = []
+
+        def note_removed(node: Node) -> None:
+            nonlocal removed
+            if node[0] <= n_old:
+                removed = min(removed, node[0])
+            for c in node[2]:
+                note_removed(c)
+
+        def prune(node: Node, forbidden: int) -> Node | None:
+            nonlocal marked
+            name, label, children = node
+            label &= ~forbidden
+            if not label:
+                note_removed(node)
+                return None
+            kids = []
+            covered = 0
+            for c in children:
+                r = prune(c, forbidden | covered)
+                if r is not None:
+                    kids.append(r)
+                    covered |= r[1]
+            if kids and covered == label:
+                marked = min(marked, name)
+                for k in kids:
+                    note_removed(k)
+                kids = []
+            survivors.append(name)
+            return (name, label, tuple(kids))
+
+        result = prune(grow(tree), 0)
+        if result is None:
+            return None, 2 * removed - 1 if removed < top else top
+        rank = {name: i + 1 for i, name in enumerate(sorted(survivors))}
+
+        def rename(node: Node) -> Node:
+            return (rank[node[0]], node[1], tuple(rename(c) for c in node[2]))
+
+        if removed < marked:
+            prio = 2 * removed - 1
+        elif marked < removed:
+            prio = 2 * marked
+        else:
+            prio = top
+        return rename(result), prio
+
+    start: tuple[Node | None, int] = ((1, 1 << initial, ()), top)
+    index = {start: 0}
+    states = [start]
+    table: list[list[int]] = []
+    i = 0
+    while i < len(states):
+        tree = states[i][0]
+        row = []
+        for a in range(n_letters):
+            nxt = step(tree, a)
+            j = index.get(nxt)
+            if j is None:
+                j = len(states)
+                index[nxt] = j
+                states.append(nxt)
+            row.append(j)
+        table.append(row)
+        i += 1
+    prios = [p for _, p in states]
+    pairs = []
+    for even in sorted({p for p in prios if p % 2 == 0}):
+        good = {s for s, p in enumerate(prios) if p == even}
+        bad = {s for s, p in enumerate(prios) if p < even}
+        pairs.append((good, bad))
+    names = [f"{_text(t, 0)} p{p}" for t, p in states]
+    return SafraResult(table, names, pairs)

@@ -206,12 +206,16 @@ def _nnf(f: Formula, neg: bool) -> Formula:
         return mk_or(*parts) if (op == "&") == neg else mk_and(*parts)
     if op == "->":
         a, b = f.children
-        return mk_and(_nnf(a, False), _nnf(b, True)) if neg else mk_or(_nnf(a, True), _nnf(b, False))
+        return (
+            mk_and(_nnf(a, False), _nnf(b, True)) if neg else mk_or(_nnf(a, True), _nnf(b, False))
+        )
     if op in ("<->", "xor"):
         a, b = f.children
         same = (op == "<->") != neg
         if same:
-            return mk_or(mk_and(_nnf(a, False), _nnf(b, False)), mk_and(_nnf(a, True), _nnf(b, True)))
+            return mk_or(
+                mk_and(_nnf(a, False), _nnf(b, False)), mk_and(_nnf(a, True), _nnf(b, True))
+            )
         return mk_or(mk_and(_nnf(a, False), _nnf(b, True)), mk_and(_nnf(a, True), _nnf(b, False)))
     if op == "X":
         return mk_X(_nnf(f.children[0], neg))

@@ -32,11 +32,12 @@ import numpy as np
 
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import AutomatonError
+from planner.ltl.compose import delay, product
 from planner.ltl.parser import parse
 from planner.ltl.progression import FF, TT, Progression, explore
 from planner.ltl.reduce import reduce_rabin
-from planner.ltl.safra import determinise
-from planner.ltl.simplify import is_cosafe, is_safe, simplify
+from planner.ltl.safra import determinise, determinise_parity
+from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, simplify
 from planner.ltl.syntax import Formula
 from planner.ltl.tableau import build_tgba
 
@@ -101,7 +102,7 @@ def _safra(f: Formula, props: tuple[str, ...]):
     mask = sum(1 << q for q in range(n) if useful[q])
     succ = [[m & mask for m in row] for row in succ]
     succ_acc = [[m & mask for m in row] for row in succ_acc]
-    res = determinise(n_letters, 0, succ, succ_acc)
+    res = determinise_parity(n_letters, 0, succ, succ_acc)
     size = len(res.table)
     pairs = []
     for good, bad in res.pairs:
@@ -146,6 +147,91 @@ def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
         reached = new
 
 
+def _monitor(f: Formula, props: tuple[str, ...], recurrence: bool):
+    """Restart monitors: ``G F h`` (``F h`` co-safe) as a deterministic Büchi automaton and
+    ``F G h`` (``G h`` safe) as a deterministic co-Büchi automaton.
+
+    The monitor progresses ``m = F h`` (resp. ``G h``); when the progression reaches
+    ``true`` (resp. ``false``) it restarts from ``m`` in a state flagged good (resp. bad).
+    ``G F h`` holds iff ``F h`` is discharged infinitely often; ``F G h`` iff ``G h`` fails
+    finitely often.
+    """
+    prog = Progression(props)
+    start_dnf = prog.dnf(f)
+    done = TT if recurrence else FF
+    start = (start_dnf, False)
+    index = {start: 0}
+    keys = [start]
+    rows = []
+    i = 0
+    while i < len(keys):
+        row = []
+        for a in range(1 << len(props)):
+            nxt = prog.af(keys[i][0], a)
+            key = (start_dnf, True) if nxt == done else (nxt, False)
+            j = index.get(key)
+            if j is None:
+                j = len(keys)
+                index[key] = j
+                keys.append(key)
+            row.append(j)
+        rows.append(row)
+        i += 1
+    flag = np.array([k[1] for k in keys])
+    pair = (flag, np.zeros_like(flag)) if recurrence else (np.ones_like(flag), flag)
+    names = [prog.text(d) + (" !" if fl else "") for d, fl in keys]
+    return np.array(rows, dtype=np.int64), 0, [pair], names
+
+
+def _translate(g: Formula, own: tuple[str, ...]):
+    """Reduced raw automaton of NNF formula ``g`` over ``own`` (see the module docstring)."""
+    if is_cosafe(g):
+        return reduce_rabin(*_progression_dfa(g, own, cosafe=True))
+    if is_safe(g):
+        return reduce_rabin(*_progression_dfa(g, own, cosafe=False))
+    op = g.op
+    parts = None
+    conj = op == "&"
+    if op in ("&", "|"):
+        parts = list(g.children)
+    elif op == "G" and g.children[0].op == "&":
+        parts, conj = [mk_G(c) for c in g.children[0].children], True
+    elif op == "F" and g.children[0].op == "|":
+        parts, conj = [mk_F(c) for c in g.children[0].children], False
+    if parts is not None:
+        # Group the co-safe and the safe operands: each group is one (DFA) operand.
+        groups = {"cosafe": [], "safe": [], "other": []}
+        for c in parts:
+            kind = "cosafe" if is_cosafe(c) else "safe" if is_safe(c) else "other"
+            groups[kind].append(c)
+        mk = mk_and if conj else mk_or
+        operands = [mk(*groups[k]) for k in ("cosafe", "safe") if groups[k]] + groups["other"]
+        if len(operands) > 1:
+            raws = [_translate(c, own) for c in operands]
+            result = _product_reduced(raws, conj)
+            if result is not None:
+                return result
+    if op == "X":
+        return reduce_rabin(*delay(_translate(g.children[0], own)))
+    if op == "G" and g.children[0].op == "F" and is_cosafe(g.children[0]):
+        return reduce_rabin(*_monitor(g.children[0], own, recurrence=True))
+    if op == "F" and g.children[0].op == "G" and is_safe(g.children[0]):
+        return reduce_rabin(*_monitor(g.children[0], own, recurrence=False))
+    return reduce_rabin(*_safra(g, own))
+
+
+def _product_reduced(raws, conj: bool):
+    """Pairwise products, reducing after each; ``None`` if a product is refused."""
+    raws = sorted(raws, key=lambda r: r[0].shape[0])
+    acc = raws[0]
+    for r in raws[1:]:
+        p = product([acc, r], conj)
+        if p is None:
+            return None
+        acc = reduce_rabin(*p)
+    return acc
+
+
 def _expand_alphabet(table: np.ndarray, own: tuple[str, ...], props: tuple[str, ...]):
     """Re-index letters from the formula's own propositions to the full alphabet."""
     if own == props:
@@ -173,18 +259,17 @@ def translate(formula: str | Formula, propositions: Sequence[str] | None = None)
     props = _alphabet(f, propositions)
     g = simplify(f)
     own = tuple(p for p in props if p in g.propositions())
-    if is_cosafe(g):
-        raw = _progression_dfa(g, own, cosafe=True)
-    elif is_safe(g):
-        raw = _progression_dfa(g, own, cosafe=False)
-    else:
-        raw = _safra(g, own)
-    table, initial, pairs, names = reduce_rabin(*raw)
+    table, initial, pairs, names = _translate(g, own)
     table = _expand_alphabet(table, own, props)
     return RabinAutomaton(
         props,
         table,
         initial,
-        [RabinPair(frozenset(np.flatnonzero(gd).tolist()), frozenset(np.flatnonzero(bd).tolist())) for gd, bd in pairs],
+        [
+            RabinPair(
+                frozenset(np.flatnonzero(gd).tolist()), frozenset(np.flatnonzero(bd).tolist())
+            )
+            for gd, bd in pairs
+        ],
         state_names=names,
     )
