@@ -14,6 +14,11 @@ see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 200
   ``G F G f = F G f``;
 * absorption: ``F(f U g) = F g``, ``F(f M g) = F(f & g)``, ``G(f R g) = G g``,
   ``G(f W g) = G(f | g)``;
+* suffix-invariant ``s`` (``G F g``, ``F G g``, and ``& | X F G`` of such): ``X s = F s =
+  G s = s``, ``f U s = f R s = s``, ``s U g = g | (s & F g)``, ``s R g = G g | (s & g)``,
+  ``s W g = s | g``, ``s M g = s & g``, ``f W s = s | G f``, ``f M s = s & F f``;
+* ``F X f = X F f``, ``G X f = X G f``, ``F(f W g) = F G f | F g``, ``F(f R g) = F G g |
+  F(f & g)``, ``G(f U g) = G(f | g) & G F g``, ``G(f M g) = G g & G F f``;
 * distribution: ``X f & X g = X(f & g)``, ``G f & G g = G(f & g)``, ``X f | X g =
   X(f | g)``, ``F f | F g = F(f | g)``.
 """
@@ -124,15 +129,35 @@ def mk_or(*args: Formula) -> Formula:
     return _finish("|", items, FALSE)
 
 
+def suffix_invariant(f: Formula) -> bool:
+    """Syntactic prefix independence: ``w |= f`` iff ``w^1 |= f`` (``G F g``, ``F G g`` and
+    ``&``, ``|``, ``X``, ``F``, ``G`` of such formulas, and the constants)."""
+    op = f.op
+    if op in ("true", "false"):
+        return True
+    if op in ("F", "G"):
+        c = f.children[0]
+        return c.op == ("G" if op == "F" else "F") or suffix_invariant(c)
+    if op in ("&", "|", "X"):
+        return all(suffix_invariant(c) for c in f.children)
+    return False
+
+
 def mk_X(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE:
+    if suffix_invariant(f):
         return f
     return Formula("X", (f,))
 
 
 def mk_F(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE or f.op == "F":
+    if f.op == "F" or suffix_invariant(f):
         return f
+    if f.op == "X":
+        return mk_X(mk_F(f.children[0]))
+    if f.op == "W":
+        return mk_or(mk_F(mk_G(f.children[0])), mk_F(f.children[1]))
+    if f.op == "R":
+        return mk_or(mk_F(mk_G(f.children[1])), mk_F(mk_and(*f.children)))
     if f.op == "U":
         return mk_F(f.children[1])
     if f.op == "M":
@@ -143,8 +168,14 @@ def mk_F(f: Formula) -> Formula:
 
 
 def mk_G(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE or f.op == "G":
+    if f.op == "G" or suffix_invariant(f):
         return f
+    if f.op == "X":
+        return mk_X(mk_G(f.children[0]))
+    if f.op == "U":
+        return mk_and(mk_G(mk_or(*f.children)), mk_G(mk_F(f.children[1])))
+    if f.op == "M":
+        return mk_and(mk_G(f.children[1]), mk_G(mk_F(f.children[0])))
     if f.op == "R":
         return mk_G(f.children[1])
     if f.op == "W":
@@ -155,16 +186,20 @@ def mk_G(f: Formula) -> Formula:
 
 
 def mk_U(f: Formula, g: Formula) -> Formula:
-    if g is TRUE or g is FALSE or f is FALSE or f is g:
+    if g is TRUE or g is FALSE or f is FALSE or f is g or suffix_invariant(g):
         return g
+    if suffix_invariant(f):
+        return mk_or(g, mk_and(f, mk_F(g)))
     if f is TRUE:
         return mk_F(g)
     return Formula("U", (f, g))
 
 
 def mk_R(f: Formula, g: Formula) -> Formula:
-    if g is TRUE or g is FALSE or f is TRUE or f is g:
+    if g is TRUE or g is FALSE or f is TRUE or f is g or suffix_invariant(g):
         return g
+    if suffix_invariant(f):
+        return mk_or(mk_G(g), mk_and(f, g))
     if f is FALSE:
         return mk_G(g)
     return Formula("R", (f, g))
@@ -177,6 +212,10 @@ def mk_W(f: Formula, g: Formula) -> Formula:
         return mk_G(f)
     if f is FALSE or f is g:
         return g
+    if suffix_invariant(f):
+        return mk_or(f, g)
+    if suffix_invariant(g):
+        return mk_or(g, mk_G(f))
     return Formula("W", (f, g))
 
 
@@ -187,6 +226,10 @@ def mk_M(f: Formula, g: Formula) -> Formula:
         return mk_F(f)
     if f is TRUE or f is g:
         return g
+    if suffix_invariant(f):
+        return mk_and(f, g)
+    if suffix_invariant(g):
+        return mk_and(g, mk_F(f))
     return Formula("M", (f, g))
 
 

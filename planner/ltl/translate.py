@@ -36,7 +36,7 @@ from planner.ltl.compose import delay, product
 from planner.ltl.parser import parse
 from planner.ltl.progression import FF, TT, Progression, explore
 from planner.ltl.reduce import reduce_rabin
-from planner.ltl.safra import determinise, determinise_parity
+from planner.ltl.safra import determinise_parity
 from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, simplify
 from planner.ltl.syntax import Formula
 from planner.ltl.tableau import build_tgba
