@@ -219,10 +219,11 @@ def determinise_parity(
 
         marked = top
         removed = top
-        survivors: list[int] = []
+        survivors: set[int] = set()
 
         def note_removed(node: Node) -> None:
             nonlocal removed
+            survivors.discard(node[0])
             if node[0] <= n_old:
                 removed = min(removed, node[0])
             for c in node[2]:
@@ -247,7 +248,7 @@ def determinise_parity(
                 for k in kids:
                     note_removed(k)
                 kids = []
-            survivors.append(name)
+            survivors.add(name)
             return (name, label, tuple(kids))
 
         result = prune(grow(tree), 0)

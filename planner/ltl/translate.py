@@ -29,6 +29,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import AutomatonError
@@ -71,24 +73,48 @@ def _safra(f: Formula, props: tuple[str, ...]):
     tgba = build_tgba(f, props)
     n_letters = 1 << len(props)
     k = tgba.n_acc
-    levels = max(k, 1)
-    full = (1 << k) - 1
-    # Degeneralisation: state (q, level); an edge is accepting when it completes a round.
-    n = len(tgba.states) * levels
+    # SCC-aware degeneralisation: inside each SCC of the TGBA the round-robin counter only
+    # visits the acceptance sets that some inner edge misses; edges between SCCs reset it.
+    n_q = len(tgba.states)
+    src = [q for q, edges in enumerate(tgba.edges) for _ in edges]
+    dst = [t for edges in tgba.edges for _, t, _ in edges]
+    graph = csr_matrix(
+        (
+            np.ones(len(src), dtype=np.int8),
+            (np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)),
+        ),
+        shape=(n_q, n_q),
+    )
+    _, scc = connected_components(graph, directed=True, connection="strong")
+    scc = scc.tolist()
+    inner_all = {}
+    for q, edges in enumerate(tgba.edges):
+        for _, t, acc in edges:
+            if scc[q] == scc[t]:
+                inner_all[scc[q]] = inner_all.get(scc[q], (1 << k) - 1) & acc
+    relevant = {c: [j for j in range(k) if not m >> j & 1] for c, m in inner_all.items()}
+    offset = []
+    n = 0
+    for q in range(n_q):
+        offset.append(n)
+        n += max(1, len(relevant.get(scc[q], [])))
     succ = [[0] * n_letters for _ in range(n)]
     succ_acc = [[0] * n_letters for _ in range(n)]
     for q, edges in enumerate(tgba.edges):
-        for lvl in range(levels):
-            src = q * levels + lvl
-            row, row_acc = succ[src], succ_acc[src]
+        rel = relevant.get(scc[q], [])
+        for lvl in range(max(1, len(rel))):
+            row, row_acc = succ[offset[q] + lvl], succ_acc[offset[q] + lvl]
             for letters, target, acc in edges:
-                j = lvl
-                while j < k and acc >> j & 1:
-                    j += 1
-                accepting = j >= k or acc == full
-                if j >= k:
-                    j = 0
-                bit = 1 << (target * levels + j)
+                if scc[target] != scc[q]:
+                    j, accepting = 0, False
+                else:
+                    j = lvl
+                    while j < len(rel) and acc >> rel[j] & 1:
+                        j += 1
+                    accepting = j >= len(rel)
+                    if accepting:
+                        j = 0
+                bit = 1 << (offset[target] + j)
                 rest = letters
                 while rest:
                     low = rest & -rest
@@ -115,9 +141,6 @@ def _safra(f: Formula, props: tuple[str, ...]):
 
 
 def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
     src, dst, acc_src, acc_dst = [], [], [], []
     for q in range(n):
         for a in range(n_letters):
