@@ -36,8 +36,8 @@ def to_dot(automaton: RabinAutomaton, title: str | None = None) -> str:
     for s in a.states:
         acc = [f"+{i}" for i, p in enumerate(a.pairs) if s in p.good]
         acc += [f"-{i}" for i, p in enumerate(a.pairs) if s in p.bad]
-        text = f"{s}: {a.state_names[s]}" + (f"\\n{{{' '.join(acc)}}}" if acc else "")
-        lines.append(f'  s{s} [label="{_esc(text).replace(chr(92) * 2 + "n", chr(92) + "n")}"];')
+        text = _esc(f"{s}: {a.state_names[s]}") + (f"\\n{{{' '.join(acc)}}}" if acc else "")
+        lines.append(f'  s{s} [label="{text}"];')
     for s in a.states:
         groups: dict[int, list[int]] = {}
         for letter, t in enumerate(a.transitions[s].tolist()):

@@ -438,8 +438,19 @@ def _to_rabin(table, marks, start, acceptance, aps) -> RabinAutomaton:
     def member(m: frozenset[int], atom: tuple[int, bool]) -> bool:
         return (atom[0] in m) != atom[1]
 
+    # State-based input (every edge of a state has the same marks) keeps one state per
+    # state; otherwise states are split by the marks of the edge that enters them.
+    n_states = table.shape[0]
+    defined = table >= 0
+    own_marks: list[frozenset[int] | None] = []
+    for q in range(n_states):
+        ms = {marks[q, x] for x in range(n_letters) if defined[q, x]}
+        own_marks.append(next(iter(ms)) if len(ms) == 1 else frozenset() if not ms else None)
+    state_based = all(m is not None for m in own_marks)
+
     sink = ("sink",)
-    init = (start, frozenset(), tuple(0 for _ in gen))
+    first = own_marks[start] if state_based else frozenset()
+    init = (start, first, tuple(0 for _ in gen))
     index = {init: 0}
     states: list = [init]
     rows: list[list[int]] = []
@@ -451,7 +462,8 @@ def _to_rabin(table, marks, start, acceptance, aps) -> RabinAutomaton:
             if key == sink or table[key[0], x] < 0:
                 nxt = sink
             else:
-                m = marks[key[0], x]
+                target = int(table[key[0], x])
+                m = own_marks[target] if state_based else marks[key[0], x]
                 counters = []
                 for c_i, d in enumerate(gen):
                     c = key[2][c_i]
@@ -461,7 +473,7 @@ def _to_rabin(table, marks, start, acceptance, aps) -> RabinAutomaton:
                     while c < k and member(m, infs[d][c]):
                         c += 1
                     counters.append(c)
-                nxt = (int(table[key[0], x]), m, tuple(counters))
+                nxt = (target, m, tuple(counters))
             j = index.get(nxt)
             if j is None:
                 j = len(states)

@@ -7,6 +7,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from planner.errors import AutomatonError, LTLSyntaxError
+from planner.ltl.parser import parse
+from planner.ltl.simplify import simplify
+from planner.ltl.syntax import Formula
 from planner.ltl.translate import translate
 from tests.planner.ltl_oracle import PROPS, automaton_accepts, evaluate, lasso_batches, render
 
@@ -121,3 +125,47 @@ def test_random_formulas(f):
 
 def test_reach_avoid_has_three_states():
     assert translate("!Haz U Goal").n_states == 3
+
+
+def test_alphabet_order_and_extension():
+    aut = translate("!Haz U Goal", ["Haz", "Other", "Goal"])
+    assert aut.propositions == ("Haz", "Other", "Goal")
+    assert aut.n_states == 3
+    assert aut.accepts([["Other"]], [["Goal", "Other"]])
+    assert not aut.accepts([["Haz", "Other"]], [["Goal"]])
+    with pytest.raises(AutomatonError, match="'Goal'"):
+        translate("!Haz U Goal", ["Haz"])
+    with pytest.raises(AutomatonError, match="duplicate"):
+        translate("a", ["a", "a"])
+
+
+def test_syntax_error_propagates():
+    with pytest.raises(LTLSyntaxError):
+        translate("G (a ->")
+
+
+def to_oracle(f: Formula) -> tuple:
+    """Test-side view of a library formula as the oracle's tuples."""
+    if f.op == "ap":
+        return ("ap", f.name)
+    if f.op in ("true", "false"):
+        return (f.op,)
+    kids = [to_oracle(c) for c in f.children]
+    if f.op in ("&", "|"):
+        out = kids[0]
+        for k in kids[1:]:
+            out = (f.op, out, k)
+        return out
+    return (f.op, *kids)
+
+
+@settings(max_examples=300, deadline=None)
+@given(formulas(4))
+def test_simplify_is_equivalent(f):
+    g = simplify(parse(render(f)))
+    assert all(x.op not in ("->", "<->", "xor") for x in g.subformulas())
+    assert all(x.op != "!" or x.children[0].op == "ap" for x in g.subformulas())
+    for letters, start in BATCHES[:6]:
+        assert np.array_equal(
+            evaluate(f, letters, start)[:, 0], evaluate(to_oracle(g), letters, start)[:, 0]
+        )
