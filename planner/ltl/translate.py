@@ -36,10 +36,10 @@ from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import AutomatonError
 from planner.ltl.compose import delay, product
 from planner.ltl.parser import parse
-from planner.ltl.progression import FF, TT, Progression, explore
+from planner.ltl.progression import FF, TT, Progression, dnf_and, explore
 from planner.ltl.reduce import reduce_rabin
 from planner.ltl.safra import determinise_parity
-from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, simplify
+from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, negate, simplify
 from planner.ltl.syntax import Formula
 from planner.ltl.tableau import build_tgba
 
@@ -206,6 +206,56 @@ def _monitor(f: Formula, props: tuple[str, ...], recurrence: bool):
     return np.array(rows, dtype=np.int64), 0, [pair], names
 
 
+def _breakpoint(psi: Formula, props: tuple[str, ...], complement: bool):
+    """``G psi`` for co-safe ``psi`` as a deterministic Büchi automaton (or, with
+    ``complement``, its complement ``F !psi`` as a deterministic co-Büchi automaton).
+
+    Breakpoint construction (Miyano & Hayashi, TCS 32, 1984) on progressed formulas: a state
+    ``(X, Y)`` holds ``X``, the conjunction of the obligations ``psi`` started since the
+    previous breakpoint and before the current batch, progressed so far, and ``Y``, those
+    of the current batch. Reading ``a``: ``X' = af(X, a)``, ``Y' = af(Y, a) & psi``. If
+    either becomes ``false`` an obligation failed (rejecting sink). If ``X'`` is ``true``,
+    the batch is discharged: the next state is ``(Y', true)`` and is flagged. Each batch is
+    finite and every co-safe obligation that holds is discharged after finitely many
+    letters, so ``G psi`` holds iff flagged states recur.
+    """
+    prog = Progression(props)
+    d_psi = prog.dnf(psi)
+    start = (d_psi, TT, False)
+    sink = (FF, FF, False)
+    index = {start: 0}
+    keys = [start]
+    rows = []
+    i = 0
+    while i < len(keys):
+        x, y, _ = keys[i]
+        row = []
+        for a in range(1 << len(props)):
+            if x == FF:
+                key = sink
+            else:
+                x1 = prog.af(x, a)
+                y1 = dnf_and(prog.af(y, a), d_psi)
+                if x1 == FF or y1 == FF:
+                    key = sink
+                elif x1 == TT:
+                    key = (y1, TT, True)
+                else:
+                    key = (x1, y1, False)
+            j = index.get(key)
+            if j is None:
+                j = len(keys)
+                index[key] = j
+                keys.append(key)
+            row.append(j)
+        rows.append(row)
+        i += 1
+    flag = np.array([k[2] for k in keys])
+    pair = (np.ones_like(flag), flag) if complement else (flag, np.zeros_like(flag))
+    names = [f"[{prog.text(x)}] [{prog.text(y)}]" + (" !" if f else "") for x, y, f in keys]
+    return np.array(rows, dtype=np.int64), 0, [pair], names
+
+
 def _translate(g: Formula, own: tuple[str, ...]):
     """Reduced raw automaton of NNF formula ``g`` over ``own`` (see the module docstring)."""
     if is_cosafe(g):
@@ -240,6 +290,10 @@ def _translate(g: Formula, own: tuple[str, ...]):
         return reduce_rabin(*_monitor(g.children[0], own, recurrence=True))
     if op == "F" and g.children[0].op == "G" and is_safe(g.children[0]):
         return reduce_rabin(*_monitor(g.children[0], own, recurrence=False))
+    if op == "G" and is_cosafe(g.children[0]):
+        return reduce_rabin(*_breakpoint(g.children[0], own, complement=False))
+    if op == "F" and is_safe(g.children[0]):
+        return reduce_rabin(*_breakpoint(negate(g.children[0]), own, complement=True))
     return reduce_rabin(*_safra(g, own))
 
 
