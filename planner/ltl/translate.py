@@ -1,27 +1,34 @@
-"""Translation of LTL formulas to complete deterministic state-based Rabin automata.
+r"""Translation of LTL formulas to complete deterministic state-based Rabin automata.
 
-Pipeline:
+Pipeline (:func:`translate`):
 
 1. :func:`planner.ltl.simplify.simplify`: negation normal form and rewrite rules.
-2. Fast paths (exact, and minimal for their fragment):
+2. Fast paths, by the shape of the simplified formula ``g`` (each exact):
 
-   * *syntactically co-safe* formulas (temporal operators ``X F U M`` only) and
-   * *syntactically safe* formulas (``X G R W`` only)
+   * ``g`` *syntactically co-safe* (temporal operators ``X F U M`` only) or *safe* (``X G R
+     W`` only): the DFA whose states are the formulas reached by progression
+     (:mod:`planner.ltl.progression`; Esparza, Křetínský & Sickert, LICS 2018), minimised.
+     A co-safe formula holds iff progression reaches ``true`` (pair ``({true}, {})``), a
+     safe one iff it never reaches ``false`` (pair ``(S \ {false}, {false})``).
+     ``!Haz U Goal`` gives 3 states.
+   * ``g = g_1 & ... & g_k`` or ``g_1 | ... | g_k`` (also ``G(g_1 & ..)``, ``F(g_1 | ..)``):
+     the co-safe operands, and the safe ones, are grouped into one formula each; the
+     operands are translated recursively and combined by synchronous products
+     (:mod:`planner.ltl.compose`).
+   * ``g = X h``: the automaton of ``h`` behind a fresh initial state.
+   * ``G F h`` / ``F G h`` with ``F h`` co-safe / ``G h`` safe: restart monitors (a
+     deterministic Büchi / co-Büchi automaton).
+   * ``G h`` with ``h`` co-safe / ``F h`` with ``h`` safe: breakpoint construction on
+     progressed formulas (Miyano & Hayashi 1984), a deterministic Büchi / co-Büchi automaton.
 
-   are translated to a DFA whose states are the formulas reached by progression
-   (:mod:`planner.ltl.progression`), minimised (Moore). A co-safe formula holds iff the
-   progression reaches ``true`` (one pair ``({true}, {})``); a safe formula iff it never
-   reaches ``false`` (one pair ``(S \\ {false}, {false})``). ``!Haz U Goal`` gives 3 states.
 3. Every other formula: tableau to a transition-based generalised Büchi automaton
-   (Gerth-Peled-Vardi-Wolper 1995 / Couvreur 1999, :mod:`planner.ltl.tableau`), counter
-   degeneralisation to a transition-based Büchi automaton, removal of states with an empty
-   language, Safra's determinisation to state-based Rabin acceptance (Safra 1988,
-   :mod:`planner.ltl.safra`). If the formula's negation is co-safe or safe, or if its
-   determinised negation is smaller, the translator also builds the automaton of ``!f``
-   from its DFA only when the complement stays Rabin-expressible as one pair (complement of
-   a co-safe DFA is a safety automaton and vice versa).
-4. :func:`planner.ltl.reduce.reduce_rabin`: reachable part, SCC-local acceptance clean-up,
-   merge of empty-language states, bisimulation quotient, pair clean-up.
+   (Gerth, Peled, Vardi & Wolper 1995; Couvreur 1999; :mod:`planner.ltl.tableau`),
+   SCC-aware counter degeneralisation to a transition-based Büchi automaton, removal of NBA
+   states with an empty language, then Safra's determinisation with Piterman's compact
+   trees to a parity condition made state-based Rabin (:mod:`planner.ltl.safra`).
+4. After every construction, :func:`planner.ltl.reduce.reduce_rabin`: reachable part,
+   SCC-local acceptance clean-up, merge of empty-language states, bisimulation quotient,
+   pair clean-up.
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ from planner.ltl.compose import delay, product
 from planner.ltl.parser import parse
 from planner.ltl.progression import FF, TT, Progression, dnf_and, explore
 from planner.ltl.reduce import reduce_rabin
-from planner.ltl.safra import determinise_parity
+from planner.ltl.safra import determinise
 from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, negate, simplify
 from planner.ltl.syntax import Formula
 from planner.ltl.tableau import build_tgba
@@ -128,7 +135,7 @@ def _safra(f: Formula, props: tuple[str, ...]):
     mask = sum(1 << q for q in range(n) if useful[q])
     succ = [[m & mask for m in row] for row in succ]
     succ_acc = [[m & mask for m in row] for row in succ_acc]
-    res = determinise_parity(n_letters, 0, succ, succ_acc)
+    res = determinise(n_letters, 0, succ, succ_acc)
     size = len(res.table)
     pairs = []
     for good, bad in res.pairs:
