@@ -105,7 +105,7 @@ def reduce_rabin(
     table = np.asarray(table, dtype=np.int64)
     goods = np.array([g for g, _ in pairs], dtype=bool).reshape(len(pairs), table.shape[0])
     bads = np.array([b for _, b in pairs], dtype=bool).reshape(len(pairs), table.shape[0])
-    names = list(names)
+    origin = np.arange(table.shape[0])  # original index of each current state
     while True:
         # 1. reachable part
         keep = _reachable(table, initial)
@@ -114,7 +114,7 @@ def reduce_rabin(
             table = new_index[table[keep]]
             initial = int(new_index[initial])
             goods, bads = goods[:, keep], bads[:, keep]
-            names = [nm for nm, k in zip(names, keep, strict=True) if k]
+            origin = origin[keep]
         n = table.shape[0]
         # 2. SCC-local clean-up of the pairs
         labels, cyclic = _scc(table)
@@ -170,9 +170,9 @@ def reduce_rabin(
         changed = n_cls != n or len(kept) != goods.shape[0]
         table = new_table
         initial = int(cls[initial])
-        names = [names[r] for r in reps]
+        origin = origin[reps]
         goods = np.array([g for g, _ in kept], dtype=bool).reshape(len(kept), n_cls)
         bads = np.array([b for _, b in kept], dtype=bool).reshape(len(kept), n_cls)
         if not changed:
             break
-    return table, initial, list(zip(goods, bads, strict=True)), names
+    return table, initial, list(zip(goods, bads, strict=True)), [names[i] for i in origin.tolist()]

@@ -28,6 +28,7 @@ renamed and is marked infinitely often).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 Node = tuple  # (name: int, label: int bitmask over NBA states, children: tuple[Node, ...])
@@ -38,7 +39,7 @@ class SafraResult:
     """The deterministic automaton: ``table[s][a]``, state descriptions and Rabin pairs."""
 
     table: list[list[int]]
-    names: list[str]
+    names: Sequence[str]
     pairs: list[tuple[set[int], set[int]]]
 
 
@@ -96,10 +97,9 @@ def determinise(
     def count(node: Node) -> int:
         return 1 + sum(count(c) for c in node[2])
 
-    def step(tree: Node | None, a: int) -> tuple[Node | None, int]:
+    def step(tree: Node | None, n_old: int, a: int) -> tuple[Node | None, int]:
         if tree is None:
             return None, top
-        n_old = count(tree)
         fresh = n_old
 
         def grow(node: Node) -> Node:
@@ -167,17 +167,22 @@ def determinise(
     states = [start]
     table: list[list[int]] = []
     i = 0
+    rows_by_tree: dict[Node | None, list[int]] = {}  # successors depend on the tree only
     while i < len(states):
         tree = states[i][0]
-        row = []
-        for a in range(n_letters):
-            nxt = step(tree, a)
-            j = index.get(nxt)
-            if j is None:
-                j = len(states)
-                index[nxt] = j
-                states.append(nxt)
-            row.append(j)
+        row = rows_by_tree.get(tree)
+        if row is None:
+            row = []
+            n_old = count(tree) if tree is not None else 0
+            for a in range(n_letters):
+                nxt = step(tree, n_old, a)
+                j = index.get(nxt)
+                if j is None:
+                    j = len(states)
+                    index[nxt] = j
+                    states.append(nxt)
+                row.append(j)
+            rows_by_tree[tree] = row
         table.append(row)
         i += 1
     prios = [p for _, p in states]
@@ -186,5 +191,18 @@ def determinise(
         good = {s for s, p in enumerate(prios) if p == even}
         bad = {s for s, p in enumerate(prios) if p < even}
         pairs.append((good, bad))
-    names = [f"{_text(t, 0)} p{p}" for t, p in states]
-    return SafraResult(table, names, pairs)
+    return SafraResult(table, _Names(states), pairs)
+
+
+class _Names(Sequence):
+    """State names, rendered only for the states that survive reduction."""
+
+    def __init__(self, states: list) -> None:
+        self._states = states
+
+    def __len__(self) -> int:
+        return len(self._states)
+
+    def __getitem__(self, i):
+        tree, prio = self._states[i]
+        return f"{_text(tree, 0)} p{prio}"
