@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 from planner.automaton import RabinAutomaton
-from planner.ltl.hoa import _cubes
+from planner.ltl.boolean import cover
 
 
 def _label(letters: list[int], props: tuple[str, ...]) -> str:
     if len(letters) == 1 << len(props):
         return "true"
     parts = []
-    for mask, val in _cubes(letters, len(props)):
+    for mask, val in cover(letters, len(props)):
         lits = [("" if val >> b & 1 else "!") + p for b, p in enumerate(props) if mask >> b & 1]
         parts.append(" & ".join(lits) if lits else "true")
     return " | ".join(parts)

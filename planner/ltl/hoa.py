@@ -27,6 +27,7 @@ import numpy as np
 
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import HOAError, NondeterministicAutomatonError
+from planner.ltl.boolean import cover
 from planner.ltl.reduce import reduce_rabin
 
 
@@ -34,35 +35,11 @@ def _quote(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def _cubes(letters: list[int], n_props: int) -> list[tuple[int, int]]:
-    """Prime implicants ``(care_mask, value)`` covering exactly ``letters``."""
-    full = (1 << n_props) - 1
-    current = {(full, x) for x in letters}
-    primes: set[tuple[int, int]] = set()
-    while current:
-        merged: set[tuple[int, int]] = set()
-        used: set[tuple[int, int]] = set()
-        by_mask: dict[int, set[int]] = {}
-        for mask, val in current:
-            by_mask.setdefault(mask, set()).add(val)
-        for mask, vals in by_mask.items():
-            for val in vals:
-                for b in range(n_props):
-                    bit = 1 << b
-                    if mask & bit and not val & bit and (val | bit) in vals:
-                        merged.add((mask & ~bit, val))
-                        used.add((mask, val))
-                        used.add((mask, val | bit))
-        primes |= current - used
-        current = merged
-    return sorted(primes)
-
-
 def _label(letters: list[int], n_props: int) -> str:
     if len(letters) == 1 << n_props:
         return "t"
     parts = []
-    for mask, val in _cubes(letters, n_props):
+    for mask, val in cover(letters, n_props):
         lits = [f"{'' if val >> b & 1 else '!'}{b}" for b in range(n_props) if mask >> b & 1]
         parts.append("&".join(lits) if lits else "t")
     return (

@@ -19,6 +19,8 @@ see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 200
   ``s W g = s | g``, ``s M g = s & g``, ``f W s = s | G f``, ``f M s = s & F f``;
 * ``F X f = X F f``, ``G X f = X G f``, ``F(f W g) = F G f | F g``, ``F(f R g) = F G g |
   F(f & g)``, ``G(f U g) = G(f | g) & G F g``, ``G(f M g) = G g & G F f``;
+* propositional subformulas (no temporal operator, at most 6 propositions) are replaced
+  by a prime-implicant cover of their truth table when that is smaller;
 * distribution: ``X f & X g = X(f & g)``, ``G f & G g = G(f & g)``, ``X f | X g =
   X(f | g)``, ``F f | F g = F(f | g)``.
 """
@@ -27,7 +29,8 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from planner.ltl.syntax import FALSE, TRUE, Formula
+from planner.ltl.boolean import cover
+from planner.ltl.syntax import FALSE, TEMPORAL, TRUE, Formula, ap
 
 COSAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "F", "U", "M"})
 SAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "G", "R", "W"})
@@ -278,14 +281,77 @@ def _nnf(f: Formula, neg: bool) -> Formula:
     raise ValueError(f"unknown operator {op!r}")
 
 
+def _truth(f: Formula, bits: dict[str, int], full: int) -> int:
+    """Set of letters (bitmask over letters) on which propositional NNF ``f`` holds."""
+    op = f.op
+    if op == "true":
+        return full
+    if op == "false":
+        return 0
+    if op == "ap":
+        return bits[f.name]
+    if op == "!":
+        return full & ~bits[f.children[0].name]
+    vals = [_truth(c, bits, full) for c in f.children]
+    out = full if op == "&" else 0
+    for v in vals:
+        out = out & v if op == "&" else out | v
+    return out
+
+
+@lru_cache(maxsize=100_000)
+def _boolmin(f: Formula) -> Formula:
+    """Replace maximal propositional subformulas by a minimal-ish DNF when that is smaller."""
+    if f.op in ("true", "false", "ap", "!"):
+        return f
+    if all(g.op not in TEMPORAL for g in f.subformulas()):
+        props = sorted(f.propositions())
+        if len(props) <= 6:
+            n_letters = 1 << len(props)
+            bits = {
+                p: sum(1 << x for x in range(n_letters) if x >> i & 1) for i, p in enumerate(props)
+            }
+            table = _truth(f, bits, (1 << n_letters) - 1)
+            letters = [x for x in range(n_letters) if table >> x & 1]
+            terms = []
+            for care, value in cover(letters, len(props)):
+                lits = [
+                    ap(p) if value >> i & 1 else Formula("!", (ap(p),))
+                    for i, p in enumerate(props)
+                    if care >> i & 1
+                ]
+                terms.append(mk_and(*lits))
+            g = mk_or(*terms)
+            return g if g.size < f.size else f
+        return f
+    kids = tuple(_boolmin(c) for c in f.children)
+    if kids == f.children:
+        return f
+    return _rebuild(f.op, kids)
+
+
+def _rebuild(op: str, kids: tuple[Formula, ...]) -> Formula:
+    if op == "&":
+        return mk_and(*kids)
+    if op == "|":
+        return mk_or(*kids)
+    if op == "X":
+        return mk_X(kids[0])
+    if op == "F":
+        return mk_F(kids[0])
+    if op == "G":
+        return mk_G(kids[0])
+    return {"U": mk_U, "R": mk_R, "W": mk_W, "M": mk_M}[op](*kids)
+
+
 def simplify(f: Formula) -> Formula:
     """An equivalent, simplified formula in negation normal form."""
-    return _nnf(f, False)
+    return _boolmin(_nnf(f, False))
 
 
 def negate(f: Formula) -> Formula:
     """The simplified NNF of ``!f``."""
-    return _nnf(f, True)
+    return _boolmin(_nnf(f, True))
 
 
 def is_cosafe(f: Formula) -> bool:
