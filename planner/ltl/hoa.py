@@ -331,10 +331,10 @@ def from_hoa(text: str) -> RabinAutomaton:
             for x in letter_idx:
                 marks[q, x] = edge_marks
     end = r.take()
-    if end.kind != "marker" or end.text != "--END--":
-        raise HOAError(f"line {end.line}: expected 'State:' or '--END--', found {end.text!r}")
     if end.text == "--ABORT--":
         raise HOAError(f"line {end.line}: the automaton was aborted (--ABORT--)")
+    if end.kind != "marker" or end.text != "--END--":
+        raise HOAError(f"line {end.line}: expected 'State:' or '--END--', found {end.text!r}")
     return _to_rabin(table, marks, start, acceptance, aps)
 
 

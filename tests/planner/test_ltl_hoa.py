@@ -208,6 +208,7 @@ def test_import_foreign(text, formula, n_props):
         (BUCHI_TRANS.replace("HOA: v1", "HOA: v2"), HOAError, "version"),
         (BUCHI_TRANS.replace('AP: 1 "a"', 'AP: 2 "a"'), HOAError, "lists 1"),
         ("States: 1", HOAError, "HOA:"),
+        (BUCHI_TRANS.replace("--END--", "--ABORT--"), HOAError, "aborted"),
         (BUCHI_TRANS.replace("[0] 0 {0}", "[0] 0 {0} %"), HOAError, "line 11"),
     ],
 )
