@@ -12,7 +12,9 @@
 4. the coarsest bisimulation that respects every state's membership in every ``G_i`` and
    ``B_i`` (Moore's partition refinement, vectorised with numpy), then the quotient;
 5. removal of pairs with empty ``G``, duplicate pairs and pairs dominated by another
-   (``G_i ⊆ G_j`` and ``B_i ⊇ B_j``), and repetition of 2-5 until nothing changes.
+   (``G_i ⊆ G_j`` and ``B_i ⊇ B_j``);
+6. every state on no cycle (visited at most once by any run) is redirected to a state with
+   the same successors, whatever their acceptance marks; 1-6 repeat until nothing changes.
 
 Each step maps a run to a run with the same acceptance, so the language is unchanged.
 """
@@ -167,9 +169,20 @@ def reduce_rabin(
                 for j, (g2, b2) in enumerate(uniq)
             )
         ]
-        changed = n_cls != n or len(kept) != goods.shape[0]
+        # 6. a state on no cycle is visited at most once, so its acceptance marks are
+        # irrelevant: redirect it to a state with the same successors.
+        _, cyc_q = _scc(new_table)
+        owner: dict[bytes, int] = {}
+        for c in np.concatenate([np.flatnonzero(cyc_q), np.flatnonzero(~cyc_q)]).tolist():
+            owner.setdefault(new_table[c].tobytes(), c)
+        redirect = np.arange(n_cls)
+        for c in np.flatnonzero(~cyc_q).tolist():
+            redirect[c] = owner[new_table[c].tobytes()]
+        merged = bool((redirect != np.arange(n_cls)).any())
+        new_table = redirect[new_table]
+        changed = merged or n_cls != n or len(kept) != goods.shape[0]
         table = new_table
-        initial = int(cls[initial])
+        initial = int(redirect[cls[initial]])
         origin = origin[reps]
         goods = np.array([g for g, _ in kept], dtype=bool).reshape(len(kept), n_cls)
         bads = np.array([b for _, b in kept], dtype=bool).reshape(len(kept), n_cls)
