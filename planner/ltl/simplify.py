@@ -17,8 +17,9 @@ see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 200
 * suffix-invariant ``s`` (``G F g``, ``F G g``, and ``& | X F G`` of such): ``X s = F s =
   G s = s``, ``f U s = f R s = s``, ``s U g = g | (s & F g)``, ``s R g = G g | (s & g)``,
   ``s W g = s | g``, ``s M g = s & g``, ``f W s = s | G f``, ``f M s = s & F f``;
-* ``F X f = X F f``, ``G X f = X G f``, ``F(f W g) = F G f | F g``, ``F(f R g) = F G g |
-  F(f & g)``, ``G(f U g) = G(f | g) & G F g``, ``G(f M g) = G g & G F f``;
+* ``f R G g = G g``, ``f M G g = G g & F f``, ``F X f = X F f``, ``G X f = X G f``,
+  ``F(f W g) = F G f | F g``, ``F(f R g) = F G g | F(f & g)``, ``G(f U g) = G(f | g) &
+  G F g``, ``G(f M g) = G g & G F f``;
 * propositional subformulas (no temporal operator, at most 6 propositions) are replaced
   by a prime-implicant cover of their truth table when that is smaller;
 * distribution: ``X f & X g = X(f & g)``, ``G f & G g = G(f & g)``, ``X f | X g =
@@ -199,7 +200,7 @@ def mk_U(f: Formula, g: Formula) -> Formula:
 
 
 def mk_R(f: Formula, g: Formula) -> Formula:
-    if g is TRUE or g is FALSE or f is TRUE or f is g or suffix_invariant(g):
+    if g is TRUE or g is FALSE or f is TRUE or f is g or g.op == "G" or suffix_invariant(g):
         return g
     if suffix_invariant(f):
         return mk_or(mk_G(g), mk_and(f, g))
@@ -231,7 +232,7 @@ def mk_M(f: Formula, g: Formula) -> Formula:
         return g
     if suffix_invariant(f):
         return mk_and(f, g)
-    if suffix_invariant(g):
+    if suffix_invariant(g) or g.op == "G":
         return mk_and(g, mk_F(f))
     return Formula("M", (f, g))
 
