@@ -6,7 +6,14 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "imdp", "train_controller", "automaton")
+COMMAND_MODULES: tuple[str, ...] = (
+    "replay",
+    "scenario",
+    "hop",
+    "imdp",
+    "train_controller",
+    "automaton",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
