@@ -6,7 +6,15 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "train_controller", "run", "imdp")
+COMMAND_MODULES: tuple[str, ...] = (
+    "replay",
+    "scenario",
+    "hop",
+    "train_controller",
+    "run",
+    "imdp",
+    "automaton",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
