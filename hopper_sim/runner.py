@@ -61,6 +61,13 @@ class RunnerSettings:
         map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
         q_learning: online Q-learning settings for an unknown reward (its discount is the
             scenario's).
+        candidates: the end components exploration steers to: ``"accepting"`` (default),
+            only those that satisfy the formula, so exploration heads for the goal while the
+            RL action collects reward; ``"nonviolating"``, every MEC of the nonviolating
+            sub-model (the paper's literal reading), so exploration cycles where the average
+            reward is highest. Measured on case (a): with ``"nonviolating"`` runs often time
+            out cycling through the A cells (the robust Q-values there dwarf the pull of the
+            goal), so ``"accepting"`` is the default.
         torch_threads: torch intra-op threads during a run (the controller's and the GPs'
             small batches run fastest on one thread; restored after the run).
     """
@@ -71,6 +78,7 @@ class RunnerSettings:
     gp: FitSettings | None = None
     map_resolution: int = 2
     q_learning: QLearningSettings | None = None
+    candidates: str = "accepting"
     torch_threads: int = 1
 
 
@@ -122,6 +130,7 @@ class NavigationRunner:
             noise=TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
             p_sat=scenario.p_sat,
             discount=rp.discount,
+            candidates=self.settings.candidates,
         )
         self.switching = SwitchingSettings(
             p_rl_explore=rp.p_rl_ee, c=rp.c, eps=rp.eps, p_sat=scenario.p_sat

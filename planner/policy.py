@@ -232,8 +232,10 @@ class SwitchingPolicy:
             raise PolicyError(
                 f"plans and sat_probability disagree in shape: {shape}, {shapes}, {sat.shape}"
             )
-        if not np.isfinite(sat).all() or (sat < 0).any() or (sat > 1).any():
+        # value iteration may overshoot [0, 1] by rounding (sums of interval products)
+        if not np.isfinite(sat).all() or (sat < -1e-9).any() or (sat > 1 + 1e-9).any():
             raise PolicyError("sat_probability must lie in [0, 1]")
+        sat = np.clip(sat, 0.0, 1.0)
         s = self.settings
         self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore)
         self.goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)

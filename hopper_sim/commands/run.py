@@ -25,6 +25,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", type=int, help="number of consecutive runs (default: scenario's)")
     p.add_argument("--seed", type=int, help="seed of the first run (default: scenario's)")
     p.add_argument("--max-steps", type=int, help="hop cap per run (default: scenario's)")
+    p.add_argument(
+        "--explore-to",
+        choices=("accepting", "nonviolating"),
+        default="accepting",
+        help="end components exploration steers to (see RunnerSettings.candidates)",
+    )
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
     p.add_argument("--png", help="figure of the last run (default: runs/<scenario>.png)")
     p.add_argument("--no-rrd", action="store_true", help="write no recording")
@@ -122,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.events import Observers
     from hopper_sim.figures import FigureWriter
     from hopper_sim.recording import RerunRecorder
-    from hopper_sim.runner import NavigationRunner
+    from hopper_sim.runner import NavigationRunner, RunnerSettings
     from planner.errors import PlannerError
     from planner.qlearning import RobustQLearner
     from planner.scenario import load_scenario
@@ -164,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
         observers.append(FigureWriter(png))
     fan = Observers(observers)
     try:
-        runner = NavigationRunner(sc, observer=fan, learner=learner)
+        settings = RunnerSettings(candidates=args.explore_to)
+        runner = NavigationRunner(sc, settings=settings, observer=fan, learner=learner)
         ends = runner.run_many(n_runs, args.seed)
     except BaseException:
         if recorder is not None:
