@@ -14,7 +14,6 @@ are written atomically: to a temporary file in the same folder, then moved into 
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from matplotlib.lines import Line2D
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart
 from hopper_sim.styles import INITIAL_COLOR, label_colors
+from planner.atomic import atomic_write
 from planner.scenario import Scenario
 
 EXPLORATION_COLOR = "#ff8c00"
@@ -150,14 +150,8 @@ def render_run_figure(
         title += f": {len(hops)} hops"
     ax.set_title(title, fontsize=10)
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            fig.savefig(f, format="png", dpi=dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as f:
+        fig.savefig(f, format="png", dpi=dpi)
     return path
 
 

@@ -26,7 +26,6 @@ product model, the grid cell of each product state), so that rewards are learned
 from __future__ import annotations
 
 import os
-import tempfile
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from planner.atomic import atomic_write
 from planner.errors import QTableError
 from planner.imdp import IMDP, OrderingAdversary
 
@@ -354,17 +354,8 @@ class RobustQLearner:
             "state_cell": self.state_cell,
             "settings": np.array([s.discount, s.learning_rate, s.epsilon, s.prior_reward]),
         }
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        with atomic_write(path, fsync=True) as f:
+            np.savez(f, **arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> RobustQLearner:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from hopper_sim.controller.errors import (
     CheckpointVersionError,
 )
 from hopper_sim.controller.hop_model import N_OUTPUTS, HopNet, InputRanges
+from planner.atomic import atomic_write
 
 CHECKPOINT_FORMAT = "hopnav-hop-model"
 CHECKPOINT_VERSION = 1
@@ -66,15 +66,8 @@ def save_checkpoint(checkpoint: HopModelCheckpoint, path: str | os.PathLike) -> 
     buf = io.BytesIO()
     torch.save(payload, buf)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(buf.getvalue())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path) as fh:
+        fh.write(buf.getvalue())
     return path
 
 

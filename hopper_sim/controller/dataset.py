@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 
 from hopper_sim.controller.errors import DatasetError, InputShapeError
 from hopper_sim.controller.hop_model import N_INPUTS, N_OUTPUTS, InputRanges
+from planner.atomic import atomic_write
 
 DATASET_VERSION = 1
 
@@ -198,22 +198,15 @@ def save_dataset(dataset: HopDataset, path: str | os.PathLike) -> Path:
     """Write ``dataset`` to a compressed ``.npz`` atomically (temporary file + ``os.replace``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(
-                fh,
-                inputs=dataset.inputs,
-                outputs=dataset.outputs,
-                ok=dataset.ok,
-                status=dataset.status.astype(str),
-                metadata_json=np.array(json.dumps(dataset.metadata)),
-            )
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path) as fh:
+        np.savez_compressed(
+            fh,
+            inputs=dataset.inputs,
+            outputs=dataset.outputs,
+            ok=dataset.ok,
+            status=dataset.status.astype(str),
+            metadata_json=np.array(json.dumps(dataset.metadata)),
+        )
     return path
 
 

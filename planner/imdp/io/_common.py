@@ -3,25 +3,17 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import TextIO
 
+from planner.atomic import atomic_write as atomic_text
 from planner.errors import ModelFormatError
 
 
 def atomic_write(path: str | os.PathLike[str], fill: Callable[[TextIO], None]) -> None:
     """Write a text file through a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            fill(f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_text(path, "w") as f:
+        fill(f)
 
 
 def number(x: float) -> str:
