@@ -30,8 +30,7 @@ small, and extra threads only contend on a shared machine); the global setting i
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import gpytorch
@@ -41,6 +40,7 @@ from sklearn.cluster import KMeans
 
 from planner.errors import GPDataError
 from planner.gp.sgpr import SparseGP, SparsePosterior
+from planner.torch_threads import torch_threads
 
 _DTYPE = torch.float64
 _BATCH = torch.Size([2])
@@ -82,18 +82,6 @@ class FitReport:
     lengthscale: np.ndarray
     outputscale: np.ndarray
     noise: np.ndarray
-
-
-@contextmanager
-def _torch_threads(n: int | None) -> Iterator[None]:
-    """Run with ``n`` intra-op torch threads (restored afterwards); ``None``: leave as is."""
-    old = torch.get_num_threads()
-    if n is not None:
-        torch.set_num_threads(int(n))
-    try:
-        yield
-    finally:
-        torch.set_num_threads(old)
 
 
 def _validate(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -157,7 +145,7 @@ class LandingErrorGP:
         timed loop; it changes no results (the model is :meth:`reset` afterwards)."""
         rng = np.random.default_rng(0)
         pos = rng.uniform(0.0, 1.0, size=(8, 2))
-        with _torch_threads(self.settings.num_threads):
+        with torch_threads(self.settings.num_threads):
             self._fit(pos, np.zeros_like(pos), None)
             self.predict(pos)
         self.reset()
@@ -190,7 +178,7 @@ class LandingErrorGP:
         With ``N = 0`` the model returns to its prior (hyperparameters kept).
         """
         pos, err = _validate(positions, errors)
-        with _torch_threads(self.settings.num_threads):
+        with torch_threads(self.settings.num_threads):
             return self._fit(pos, err, on_step)
 
     def _fit(
@@ -239,7 +227,7 @@ class LandingErrorGP:
             raise GPDataError(f"points must have shape (M, 2), got {pts.shape}")
         if not np.isfinite(pts).all():
             raise GPDataError("points has non-finite values")
-        with _torch_threads(self.settings.num_threads):
+        with torch_threads(self.settings.num_threads):
             return self._posterior.predict(pts)
 
     def variation(self, half_width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
