@@ -1,0 +1,54 @@
+"""`hopnav run` end to end on a short horizon: JSON, recording and figure of a real run."""
+
+import json
+
+from hopper_sim.cli import main
+from hopper_sim.recording import summarize_recording
+
+LISTED = (
+    "world/grid",
+    "run_{k}/hop/com_arc",
+    "run_{k}/hop/foot",
+    "run_{k}/hop/leg",
+    "run_{k}/hop/target",
+    "run_{k}/hops",
+    "run_{k}/gp/mean_x",
+    "run_{k}/gp/std_y",
+    "run_{k}/plots/p_worst",
+    "run_{k}/plots/total_reward",
+    "run_{k}/plots/phase",
+    "run_{k}/outcome",
+)
+
+
+def test_run_writes_consistent_recording_and_figure(tmp_path, capsys):
+    rrd, png = tmp_path / "out.rrd", tmp_path / "out.png"
+    args = ["run", "--scenario", "c", "--runs", "2", "--max-steps", "8", "--seed", "3"]
+    assert main([*args, "--rrd", str(rrd), "--png", str(png), "--json"]) == 0
+    runs = json.loads(capsys.readouterr().out)
+    assert len(runs) == 2
+    for r in runs:
+        assert r["outcome"] in ("success", "violation", "timeout")
+        assert 1 <= r["steps"] <= 8 and r["rrd"] == str(rrd) and r["png"] == str(png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = summarize_recording(rrd)
+    for k, r in enumerate(runs):
+        for name in LISTED:
+            assert name.format(k=k) in summary["entities"], name.format(k=k)
+        rec = summary["runs"][k]
+        fell = r["reason"].startswith("hop failed")
+        assert rec["hops"] == r["steps"] - fell
+        assert rec["outcome"] == r["outcome"] and rec["steps"] == r["steps"]
+        assert abs(rec["reward"] - r["reward"]) < 1e-9
+    assert {"hop", "sim_time"} <= set(summary["timelines"])
+    # hopnav replay prints the summary headlessly
+    assert main(["replay", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    assert "run_0/hop/com_arc" in out
+
+
+def test_run_rejects_bad_scenario(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[world]\nsize = [5, 5]\n")
+    assert main(["run", "--scenario", str(bad), "--no-rrd", "--no-png"]) == 2
+    assert "bad.toml" in capsys.readouterr().err
