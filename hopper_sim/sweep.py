@@ -1,0 +1,800 @@
+"""Parameter sweeps over the switching parameters (the paper's Table I).
+
+A sweep runs ``runs`` complete navigation runs for every cell of the grid
+``P_RL,ee = C in cs`` x ``eps in epss`` on one scenario and summarises each cell by the mean
+reward and the mean number of hops (steps), each with a two-sided Student-t confidence
+interval, and by the success rate:
+
+    mean = (1/n) sum_i y_i,    s^2 = (1/(n-1)) sum_i (y_i - mean)^2,
+    CI = mean +- t_{(1+level)/2, n-1} * s / sqrt(n).
+
+Means are over all runs of a cell, whatever their outcome (a timeout counts with its capped
+step number, a violation with the hops it made), as the paper averages over complete runs;
+the success rate says how many of them reached the goal.
+
+Seeds: run ``r`` of the cell at position ``k`` (C-major: ``k = i_c * len(epss) + i_eps``) gets
+the seed ``SeedSequence(seed).spawn(n_cells * runs)[k * runs + r]`` (its first 32-bit word),
+so the table depends only on the grid, ``runs`` and ``seed``: not on the backend or the
+number of workers, nor on the order in which runs finish.
+
+Backends: ``serial`` (in this process), ``process`` (a pool of worker processes started with
+``spawn``, one thread each) and ``ray`` (the optional extra ``ray``; a local instance is
+started when no address is given). The run function is a parameter (picklable, module level,
+``run(scenario, seed, run_index) -> RunEnd``); by default
+:func:`hopper_sim.runner.run_single`, imported when the sweep starts.
+
+The library writes files only when asked (:func:`write_outputs`), always atomically
+(temporary file in the same folder, then ``os.replace``); it never prints.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from hopper_sim.events import OUTCOMES, RunEnd
+
+if TYPE_CHECKING:
+    from planner.scenario import Scenario
+
+Backend = Literal["serial", "process", "ray"]
+BACKENDS: tuple[str, ...] = ("serial", "process", "ray")
+
+RunFunction = Callable[["Scenario", int, int], RunEnd]
+"""``run(scenario, seed, run_index) -> RunEnd``: one complete navigation run."""
+
+ProgressCallback = Callable[[int, int, "SweepRow"], None]
+"""``progress(done, total, row)``: called once per finished run, in completion order."""
+
+PAPER_CS: tuple[float, ...] = (0.25, 0.50, 0.75)
+"""The paper's values of ``P_RL,ee = C`` (rows of Table I)."""
+
+PAPER_EPSS: tuple[float, ...] = (0.0025, 0.0050, 0.0075)
+"""The paper's values of ``eps`` (columns of Table I)."""
+
+PAPER_TABLE_I: dict[tuple[float, float], tuple[float, float]] = {
+    (0.25, 0.0025): (61.2, 98.0),
+    (0.25, 0.0050): (64.4, 80.6),
+    (0.25, 0.0075): (54.6, 65.1),
+    (0.50, 0.0025): (112.9, 87.2),
+    (0.50, 0.0050): (88.9, 72.8),
+    (0.50, 0.0075): (84.7, 71.2),
+    (0.75, 0.0025): (136.4, 84.7),
+    (0.75, 0.0050): (139.75, 83.0),
+    (0.75, 0.0075): (129.6, 85.3),
+}
+"""The paper's Table I: ``(C, eps) -> (mean reward, mean steps)`` over ten runs of case (a)."""
+
+ROWS_FILE = "sweep_runs.csv"
+SUMMARY_FILE = "sweep_summary.csv"
+MARKDOWN_FILE = "table_i.md"
+
+
+class SweepError(ValueError):
+    """A sweep was set up with bad parameters."""
+
+
+class SweepBackendError(RuntimeError):
+    """A backend cannot run (unknown name, or its optional package is missing)."""
+
+
+class SweepFileError(ValueError):
+    """A sweep CSV file is malformed; the message names the file, line and column."""
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+def _as_levels(name: str, values: Iterable[float]) -> tuple[float, ...]:
+    levels = tuple(float(v) for v in values)
+    if not levels:
+        raise SweepError(f"{name} must hold at least one value")
+    if len(set(levels)) != len(levels):
+        raise SweepError(f"{name} has repeated values: {levels}")
+    return levels
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """The grid of a sweep and how many runs each cell gets.
+
+    Attributes:
+        cs: values of ``P_RL,ee = C`` (probabilities in [0, 1]).
+        epss: values of the decay rate ``eps`` (>= 0, per goal-reaching step).
+        runs: runs per cell (>= 1; confidence intervals need >= 2).
+        seed: base seed (>= 0) from which every run's seed is derived.
+
+    Raises:
+        SweepError: empty or repeated levels, a level out of range, ``runs < 1``, ``seed < 0``.
+    """
+
+    cs: tuple[float, ...] = PAPER_CS
+    epss: tuple[float, ...] = PAPER_EPSS
+    runs: int = 10
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        cs = _as_levels("cs", self.cs)
+        epss = _as_levels("epss", self.epss)
+        bad_c = [c for c in cs if not 0.0 <= c <= 1.0]
+        if bad_c:
+            raise SweepError(f"cs must lie in [0, 1], got {bad_c}")
+        bad_eps = [e for e in epss if not (math.isfinite(e) and e >= 0.0)]
+        if bad_eps:
+            raise SweepError(f"epss must be finite and >= 0, got {bad_eps}")
+        if int(self.runs) != self.runs or self.runs < 1:
+            raise SweepError(f"runs must be a whole number >= 1, got {self.runs}")
+        if int(self.seed) != self.seed or self.seed < 0:
+            raise SweepError(f"seed must be a whole number >= 0, got {self.seed}")
+        object.__setattr__(self, "cs", cs)
+        object.__setattr__(self, "epss", epss)
+        object.__setattr__(self, "runs", int(self.runs))
+        object.__setattr__(self, "seed", int(self.seed))
+
+    @property
+    def cells(self) -> list[tuple[float, float]]:
+        """The ``(C, eps)`` cells, C-major."""
+        return [(c, e) for c in self.cs for e in self.epss]
+
+    @property
+    def n_runs(self) -> int:
+        """Total number of runs."""
+        return len(self.cs) * len(self.epss) * self.runs
+
+    def tasks(self) -> list[SweepTask]:
+        """Every run of the sweep with its derived seed, in table order (C, eps, run)."""
+        children = np.random.SeedSequence(self.seed).spawn(self.n_runs)
+        seeds = [int(ch.generate_state(1, dtype=np.uint32)[0]) for ch in children]
+        return [
+            SweepTask(index=k * self.runs + r, c=c, eps=e, run=r, seed=seeds[k * self.runs + r])
+            for k, (c, e) in enumerate(self.cells)
+            for r in range(self.runs)
+        ]
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One run of a sweep: its position, its cell ``(C, eps)``, its run number and seed."""
+
+    index: int
+    c: float
+    eps: float
+    run: int
+    seed: int
+
+
+@dataclass(frozen=True)
+class SweepRow:
+    """The result of one run (one line of the raw CSV).
+
+    ``p_rl_ee`` equals ``c`` in a Table I sweep; ``switch_step`` and ``p_switch`` are ``None``
+    when goal reaching never began; ``seconds`` is the run's wall-clock time.
+    """
+
+    c: float
+    eps: float
+    p_rl_ee: float
+    run: int
+    seed: int
+    outcome: str
+    steps: int
+    reward: float
+    switch_step: int | None
+    p_switch: float | None
+    backups: int
+    seconds: float
+
+    @classmethod
+    def from_run_end(cls, task: SweepTask, end: RunEnd) -> SweepRow:
+        """The row of ``task`` given the run's end event."""
+        return cls(
+            c=task.c,
+            eps=task.eps,
+            p_rl_ee=task.c,
+            run=task.run,
+            seed=task.seed,
+            outcome=end.outcome,
+            steps=int(end.steps),
+            reward=float(end.reward),
+            switch_step=None if end.switch_step is None else int(end.switch_step),
+            p_switch=None if end.p_switch is None else float(end.p_switch),
+            backups=int(end.backups),
+            seconds=float(end.seconds),
+        )
+
+
+ROW_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(SweepRow))
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@dataclass(frozen=True)
+class MeanCI:
+    """A sample mean with a two-sided Student-t confidence interval.
+
+    Attributes:
+        mean: the sample mean (nan for an empty sample).
+        half_width: ``t_{(1+level)/2, n-1} * s / sqrt(n)`` (nan when ``n < 2``).
+        n: sample size.
+        level: confidence level, e.g. 0.95.
+    """
+
+    mean: float
+    half_width: float
+    n: int
+    level: float = 0.95
+
+    @property
+    def low(self) -> float:
+        """Lower end of the interval."""
+        return self.mean - self.half_width
+
+    @property
+    def high(self) -> float:
+        """Upper end of the interval."""
+        return self.mean + self.half_width
+
+
+def mean_ci(values: Sequence[float] | np.ndarray, level: float = 0.95) -> MeanCI:
+    """Mean of ``values`` and the Student-t confidence interval at ``level``.
+
+    A sample of one has an undefined interval (``half_width`` nan); an empty sample has a nan
+    mean as well.
+
+    Raises:
+        SweepError: ``level`` outside (0, 1) or a non-finite value.
+    """
+    from scipy import stats
+
+    if not 0.0 < level < 1.0:
+        raise SweepError(f"confidence level must be in (0, 1), got {level}")
+    y = np.asarray(values, dtype=float).ravel()
+    if not np.isfinite(y).all():
+        raise SweepError(f"values must be finite, got {y[~np.isfinite(y)][:3].tolist()}")
+    n = y.size
+    if n == 0:
+        return MeanCI(math.nan, math.nan, 0, level)
+    mean = float(y.mean())
+    if n < 2:
+        return MeanCI(mean, math.nan, 1, level)
+    sem = float(y.std(ddof=1)) / math.sqrt(n)
+    return MeanCI(mean, float(stats.t.ppf(0.5 + level / 2.0, n - 1)) * sem, n, level)
+
+
+@dataclass(frozen=True)
+class CellSummary:
+    """Summary of one ``(C, eps)`` cell.
+
+    Attributes:
+        c, eps: the cell.
+        reward: mean total reward with its confidence interval.
+        steps: mean number of hops with its confidence interval.
+        successes: runs that reached the goal.
+        outcomes: number of runs per outcome (``success``, ``violation``, ``timeout``).
+        paper: the paper's ``(reward, steps)`` for this cell, or ``None`` if it has none.
+    """
+
+    c: float
+    eps: float
+    reward: MeanCI
+    steps: MeanCI
+    successes: int
+    outcomes: dict[str, int]
+    paper: tuple[float, float] | None
+
+    @property
+    def n(self) -> int:
+        """Runs in this cell."""
+        return self.reward.n
+
+    @property
+    def success_rate(self) -> float:
+        """Fraction of runs that reached the goal (nan for an empty cell)."""
+        return self.successes / self.n if self.n else math.nan
+
+
+def paper_value(c: float, eps: float) -> tuple[float, float] | None:
+    """The paper's Table I ``(reward, steps)`` at ``(c, eps)``, or ``None`` off its grid."""
+    for (pc, pe), value in PAPER_TABLE_I.items():
+        if math.isclose(pc, c, abs_tol=1e-12) and math.isclose(pe, eps, abs_tol=1e-12):
+            return value
+    return None
+
+
+def summarize(
+    rows: Sequence[SweepRow], spec: SweepSpec | None = None, level: float = 0.95
+) -> list[CellSummary]:
+    """Per-cell summaries of ``rows``, C-major.
+
+    With ``spec`` the cells are those of its grid (an empty cell gets nan means); without it,
+    the cells present in ``rows``, sorted.
+    """
+    if spec is not None:
+        cells = spec.cells
+    else:
+        cells = sorted({(r.c, r.eps) for r in rows})
+    by_cell: dict[tuple[float, float], list[SweepRow]] = {cell: [] for cell in cells}
+    for r in rows:
+        by_cell.setdefault((r.c, r.eps), []).append(r)
+    out = []
+    for c, e in cells:
+        group = by_cell[(c, e)]
+        counts = {o: sum(r.outcome == o for r in group) for o in OUTCOMES}
+        out.append(
+            CellSummary(
+                c=c,
+                eps=e,
+                reward=mean_ci([r.reward for r in group], level),
+                steps=mean_ci([r.steps for r in group], level),
+                successes=counts["success"],
+                outcomes=counts,
+                paper=paper_value(c, e),
+            )
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """A finished sweep: the scenario's name, the grid, the raw rows and the summaries.
+
+    ``rows`` are in table order (C, eps, run), whatever order the runs finished in.
+    """
+
+    scenario: str
+    spec: SweepSpec
+    rows: tuple[SweepRow, ...]
+    cells: tuple[CellSummary, ...]
+    backend: str
+    workers: int
+    seconds: float
+
+    def cell(self, c: float, eps: float) -> CellSummary:
+        """The summary of cell ``(c, eps)``.
+
+        Raises:
+            KeyError: no such cell.
+        """
+        for s in self.cells:
+            if math.isclose(s.c, c) and math.isclose(s.eps, eps):
+                return s
+        raise KeyError(f"no cell C={c}, eps={eps} in this sweep")
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict: settings, per-cell summaries (with the paper's values), rows."""
+        return _json_safe(
+            {
+                "scenario": self.scenario,
+                "cs": list(self.spec.cs),
+                "epss": list(self.spec.epss),
+                "runs": self.spec.runs,
+                "seed": self.spec.seed,
+                "backend": self.backend,
+                "workers": self.workers,
+                "seconds": self.seconds,
+                "cells": [_summary_record(s) for s in self.cells],
+                "rows": [asdict(r) for r in self.rows],
+            }
+        )
+
+
+def _json_safe(value: Any) -> Any:
+    """``value`` with every nan float replaced by ``None`` (JSON has no nan)."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+# --------------------------------------------------------------------------- running
+
+
+def default_run_function() -> RunFunction:
+    """The real navigation run, :func:`hopper_sim.runner.run_single` (imported now)."""
+    from hopper_sim.runner import run_single
+
+    return run_single
+
+
+def _run_task(run: RunFunction, scenario: Scenario, task: SweepTask) -> SweepRow:
+    sc = scenario.with_runner(p_rl_ee=task.c, c=task.c, eps=task.eps, seed=task.seed, runs=1)
+    end = run(sc, task.seed, task.run)
+    if not isinstance(end, RunEnd):
+        raise TypeError(f"the run function must return a RunEnd, got {type(end).__name__}")
+    return SweepRow.from_run_end(task, end)
+
+
+_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def _init_worker() -> None:
+    # Workers share the cores: one compute thread each (torch reads these when imported).
+    for var in _THREAD_VARS:
+        os.environ[var] = "1"
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
+def _iter_serial(
+    run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask]
+) -> Iterator[tuple[SweepTask, SweepRow]]:
+    for task in tasks:
+        yield task, _run_task(run, scenario, task)
+
+
+def _iter_process(
+    run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask], workers: int
+) -> Iterator[tuple[SweepTask, SweepRow]]:
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker) as pool:
+        pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    task = pending.pop(fut)
+                    yield task, fut.result()
+        finally:
+            for fut in pending:
+                fut.cancel()
+
+
+def _import_ray() -> Any:
+    try:
+        import ray
+    except ImportError as err:
+        raise SweepBackendError(
+            "the 'ray' backend needs the optional extra: pip install 'hopnav[ray]' "
+            "(or use --backend process)"
+        ) from err
+    return ray
+
+
+def _iter_ray(
+    run: RunFunction,
+    scenario: Scenario,
+    tasks: Sequence[SweepTask],
+    workers: int,
+    address: str | None,
+) -> Iterator[tuple[SweepTask, SweepRow]]:
+    ray = _import_ray()
+    started = False
+    if not ray.is_initialized():
+        if address is None:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address=address, log_to_driver=False)
+        started = True
+    try:
+        remote = ray.remote(num_cpus=1)(_run_task)
+        run_ref = ray.put(run)
+        scenario_ref = ray.put(scenario)
+        pending = {remote.remote(run_ref, scenario_ref, t): t for t in tasks}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                task = pending.pop(ref)
+                yield task, ray.get(ref)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_sweep(
+    scenario: Scenario,
+    spec: SweepSpec | None = None,
+    *,
+    run: RunFunction | None = None,
+    backend: Backend = "serial",
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: ProgressCallback | None = None,
+    level: float = 0.95,
+) -> SweepResult:
+    """Run every ``(C, eps, run)`` of ``spec`` on ``scenario`` and summarise the results.
+
+    Each run uses ``scenario`` with ``p_rl_ee = c = C``, ``eps`` and its derived seed set in
+    the runner settings, and calls ``run(scenario, seed, run_index)`` with ``run_index`` its
+    number within the cell.
+
+    Args:
+        scenario: the scenario (its other runner settings are kept).
+        spec: the grid, runs per cell and base seed (default: the paper's Table I, 10 runs).
+        run: the run function (default :func:`default_run_function`); for the ``process``
+            and ``ray`` backends it must be picklable (a module-level function).
+        backend: ``"serial"``, ``"process"`` or ``"ray"``.
+        workers: parallel workers for ``process``/``ray`` (default: the machine's cores).
+        ray_address: address of a running Ray cluster; ``None`` starts a local instance.
+        progress: called as ``progress(done, total, row)`` after each finished run.
+        level: confidence level of the intervals.
+
+    Raises:
+        SweepBackendError: unknown backend, or ``ray`` requested but not installed.
+        SweepError: ``workers < 1``.
+    """
+    import time
+
+    spec = SweepSpec() if spec is None else spec
+    if backend not in BACKENDS:
+        raise SweepBackendError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+    if backend == "ray":
+        _import_ray()  # fail before any work when ray is missing
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if int(workers) != workers or workers < 1:
+        raise SweepError(f"workers must be a whole number >= 1, got {workers}")
+    workers = 1 if backend == "serial" else int(workers)
+    run = default_run_function() if run is None else run
+    tasks = spec.tasks()
+    if backend == "serial":
+        stream = _iter_serial(run, scenario, tasks)
+    elif backend == "process":
+        stream = _iter_process(run, scenario, tasks, workers)
+    else:
+        stream = _iter_ray(run, scenario, tasks, workers, ray_address)
+    t0 = time.perf_counter()
+    results: list[SweepRow | None] = [None] * len(tasks)
+    for done, (task, row) in enumerate(stream, start=1):
+        results[task.index] = row
+        if progress is not None:
+            progress(done, len(tasks), row)
+    rows = tuple(r for r in results if r is not None)
+    return SweepResult(
+        scenario=scenario.name,
+        spec=spec,
+        rows=rows,
+        cells=tuple(summarize(rows, spec, level)),
+        backend=backend,
+        workers=workers,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _fmt_opt(value: float | int | None) -> str:
+    return "" if value is None else repr(value)
+
+
+def rows_csv(rows: Iterable[SweepRow]) -> str:
+    """The raw rows as CSV text (header :data:`ROW_COLUMNS`; empty field for ``None``)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(ROW_COLUMNS)
+    for r in rows:
+        writer.writerow([_fmt_opt(getattr(r, name)) for name in ROW_COLUMNS])
+    return buf.getvalue()
+
+
+def _summary_record(s: CellSummary) -> dict[str, Any]:
+    paper = s.paper or (None, None)
+    return {
+        "c": s.c,
+        "eps": s.eps,
+        "n": s.n,
+        "reward_mean": s.reward.mean,
+        "reward_ci_low": s.reward.low,
+        "reward_ci_high": s.reward.high,
+        "steps_mean": s.steps.mean,
+        "steps_ci_low": s.steps.low,
+        "steps_ci_high": s.steps.high,
+        "success_rate": s.success_rate,
+        **{f"n_{o}": s.outcomes[o] for o in OUTCOMES},
+        "paper_reward": paper[0],
+        "paper_steps": paper[1],
+    }
+
+
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "c",
+    "eps",
+    "n",
+    "reward_mean",
+    "reward_ci_low",
+    "reward_ci_high",
+    "steps_mean",
+    "steps_ci_low",
+    "steps_ci_high",
+    "success_rate",
+    *(f"n_{o}" for o in OUTCOMES),
+    "paper_reward",
+    "paper_steps",
+)
+
+
+def summary_csv(cells: Iterable[CellSummary]) -> str:
+    """Per-cell summaries as CSV text (header :data:`SUMMARY_COLUMNS`; 95 % CI ends)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(SUMMARY_COLUMNS)
+    for s in cells:
+        rec = _summary_record(s)
+        writer.writerow([_fmt_opt(rec[k]) for k in SUMMARY_COLUMNS])
+    return buf.getvalue()
+
+
+def _pm(ci: MeanCI, digits: int) -> str:
+    if math.isnan(ci.mean):
+        return "n/a"
+    if math.isnan(ci.half_width):
+        return f"{ci.mean:.{digits}f}"
+    return f"{ci.mean:.{digits}f} ± {ci.half_width:.{digits}f}"
+
+
+def _entry(s: CellSummary) -> str:
+    return f"{_pm(s.reward, 1)} / {_pm(s.steps, 1)} ({s.successes}/{s.n})"
+
+
+def _paper_entry(s: CellSummary) -> str:
+    if s.paper is None:
+        return "-"
+    return f"{s.paper[0]:g}/{s.paper[1]:g}"
+
+
+def _grid(result: SweepResult, entry: Callable[[CellSummary], str]) -> list[list[str]]:
+    spec = result.spec
+    head = ["P_RL,ee = C", *(f"eps = {e:g}" for e in spec.epss)]
+    body = [[f"{c:g}", *(entry(result.cell(c, e)) for e in spec.epss)] for c in spec.cs]
+    return [head, *body]
+
+
+def _markdown_table(grid: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(grid[0]) + " |", "|" + "---|" * len(grid[0])]
+    lines += ["| " + " | ".join(row) + " |" for row in grid[1:]]
+    return "\n".join(lines)
+
+
+def _level_pct(result: SweepResult) -> int:
+    return round(100 * (result.cells[0].reward.level if result.cells else 0.95))
+
+
+def markdown_table(result: SweepResult) -> str:
+    """Table I in Markdown: rows ``P_RL,ee = C``, columns ``eps``, then the paper's table.
+
+    An entry reads ``reward ± h / steps ± h (successes/runs)`` with ``h`` the half-width of
+    the confidence interval.
+    """
+    level = _level_pct(result)
+    has_paper = any(s.paper is not None for s in result.cells)
+    parts = [
+        f"## Table I as hopnav measured it (scenario {result.scenario})",
+        "",
+        f"Mean reward / mean steps over {result.spec.runs} runs per cell, ± the half-width of "
+        f"the {level} % Student-t confidence interval; (successes/runs) in brackets. "
+        f"Base seed {result.spec.seed}.",
+        "",
+        _markdown_table(_grid(result, _entry)),
+    ]
+    if has_paper:
+        parts += [
+            "",
+            "## Table I in the paper (reward/steps, mean of ten runs)",
+            "",
+            _markdown_table(_grid(result, _paper_entry)),
+        ]
+    return "\n".join(parts) + "\n"
+
+
+def format_table(result: SweepResult) -> str:
+    """A plain-text Table I for a terminal: measured entries beside the paper's."""
+
+    def both(s: CellSummary) -> str:
+        paper = "" if s.paper is None else f"  [paper {_paper_entry(s)}]"
+        return _entry(s) + paper
+
+    grid = _grid(result, both)
+    widths = [max(len(row[k]) for row in grid) for k in range(len(grid[0]))]
+    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in grid]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    level = _level_pct(result)
+    title = (
+        f"Table I, scenario {result.scenario}: reward / steps (± {level} % CI half-width), "
+        f"(successes/runs); {result.spec.runs} runs per cell, seed {result.spec.seed}"
+    )
+    return "\n".join([title, *lines])
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and
+    ``os.replace``, so that ``path`` is either the old file or the complete new one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_outputs(result: SweepResult, out_dir: str | Path) -> dict[str, Path]:
+    """Write the raw rows CSV, the summary CSV and the Markdown table into ``out_dir``.
+
+    Returns:
+        ``{"rows": ..., "summary": ..., "markdown": ...}``: the paths written.
+    """
+    out = Path(out_dir)
+    return {
+        "rows": atomic_write_text(out / ROWS_FILE, rows_csv(result.rows)),
+        "summary": atomic_write_text(out / SUMMARY_FILE, summary_csv(result.cells)),
+        "markdown": atomic_write_text(out / MARKDOWN_FILE, markdown_table(result)),
+    }
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _parse_field(name: str, text: str) -> Any:
+    if name in ("outcome",):
+        if text not in OUTCOMES:
+            raise ValueError(f"must be one of {OUTCOMES}, got {text!r}")
+        return text
+    if name in ("switch_step", "p_switch"):
+        if text == "":
+            return None
+        return int(text) if name == "switch_step" else float(text)
+    if name in ("run", "seed", "steps", "backups"):
+        return int(text)
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"must be finite, got {text!r}")
+    return value
+
+
+def read_rows_csv(path: str | Path) -> list[SweepRow]:
+    """Read a raw-rows CSV written by :func:`write_outputs` (``sweep_runs.csv``).
+
+    Extra columns are ignored; the columns of :data:`ROW_COLUMNS` must be present.
+
+    Raises:
+        SweepFileError: missing file, missing column or a bad value (names line and column).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise SweepFileError(f"{path}: cannot read: {err}") from err
+    reader = csv.DictReader(io.StringIO(text))
+    header = reader.fieldnames or []
+    missing = [c for c in ROW_COLUMNS if c not in header]
+    if missing:
+        raise SweepFileError(f"{path}:1: missing column(s) {missing} (need {list(ROW_COLUMNS)})")
+    rows = []
+    for record in reader:
+        line = reader.line_num
+        values = {}
+        for name in ROW_COLUMNS:
+            raw = record.get(name)
+            if raw is None:
+                raise SweepFileError(f"{path}:{line}: column '{name}': the line is too short")
+            try:
+                values[name] = _parse_field(name, raw.strip())
+            except ValueError as err:
+                raise SweepFileError(f"{path}:{line}: column '{name}': {err}") from err
+        rows.append(SweepRow(**values))
+    return rows
