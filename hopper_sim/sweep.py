@@ -404,8 +404,19 @@ def _json_safe(value: Any) -> Any:
 
 
 def default_run_function() -> RunFunction:
-    """The real navigation run, :func:`hopper_sim.runner.run_single` (imported now)."""
-    from hopper_sim.runner import run_single
+    """The real navigation run, :func:`hopper_sim.runner.run_single` (imported now).
+
+    Raises:
+        SweepBackendError: this installation has no :mod:`hopper_sim.runner`.
+    """
+    try:
+        from hopper_sim.runner import run_single
+    except ModuleNotFoundError as err:
+        if err.name != "hopper_sim.runner":
+            raise
+        raise SweepBackendError(
+            "the navigation runner hopper_sim.runner is not available in this installation"
+        ) from err
 
     return run_single
 
@@ -572,8 +583,11 @@ def run_sweep(
 # --------------------------------------------------------------------------- output
 
 
-def _fmt_opt(value: float | int | None) -> str:
-    return "" if value is None else repr(value)
+def _fmt_opt(value: object) -> str:
+    # repr of a float reads back to the same float; None is an empty field
+    if value is None:
+        return ""
+    return repr(value) if isinstance(value, float) else str(value)
 
 
 def rows_csv(rows: Iterable[SweepRow]) -> str:

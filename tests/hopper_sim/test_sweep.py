@@ -1,0 +1,373 @@
+"""Tests of the sweep machinery with a small deterministic run function.
+
+``fake_run`` stands in for the navigation runner: its result is a known function of the runner
+settings (C, eps) and the seed, so aggregation, ordering, seeding, the backends and the files
+can be checked exactly. The shipped command uses the real runner.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from hopper_sim import sweep as sw
+from hopper_sim.cli import main as hopnav
+from hopper_sim.events import RunEnd
+from hopper_sim.sweep import (
+    PAPER_TABLE_I,
+    ROW_COLUMNS,
+    SweepBackendError,
+    SweepError,
+    SweepFileError,
+    SweepRow,
+    SweepSpec,
+    mean_ci,
+    read_rows_csv,
+    run_sweep,
+    summarize,
+    write_outputs,
+)
+from planner.scenario import load_scenario
+
+SMALL = SweepSpec(cs=(0.25, 0.75), epss=(0.0025, 0.0075), runs=3, seed=7)
+
+
+def fake_run(scenario, seed: int, run_index: int) -> RunEnd:
+    """Steps fall with eps, reward grows with C, both plus seed-driven noise."""
+    r = scenario.runner
+    if r.p_rl_ee != r.c or r.seed != seed or r.runs != 1:
+        raise AssertionError(f"sweep passed inconsistent runner settings {r} for seed {seed}")
+    rng = np.random.default_rng(seed)
+    steps = int(100 - 4000 * r.eps + rng.integers(0, 10))
+    reward = float(100 * r.c + rng.normal(0.0, 5.0))
+    outcome = ("success", "success", "violation", "timeout")[seed % 4]
+    switch = None if outcome == "violation" else steps // 2
+    return RunEnd(
+        run_index=run_index,
+        outcome=outcome,
+        steps=steps,
+        reward=reward,
+        switch_step=switch,
+        p_switch=None if switch is None else 0.7,
+        backups=seed % 3,
+        seconds=0.0,
+    )
+
+
+def returns_none(scenario, seed: int, run_index: int) -> None:
+    return None
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario("a")
+
+
+@pytest.fixture(scope="module")
+def serial(scenario):
+    return run_sweep(scenario, SMALL, run=fake_run, backend="serial")
+
+
+# --------------------------------------------------------------------------- grid and seeds
+
+
+def test_default_spec_is_table_i():
+    spec = SweepSpec()
+    assert spec.cs == (0.25, 0.5, 0.75)
+    assert spec.epss == (0.0025, 0.005, 0.0075)
+    assert spec.runs == 10
+    assert set(spec.cells) == set(PAPER_TABLE_I)
+    assert spec.n_runs == 90
+
+
+def test_tasks_table_order_and_distinct_seeds():
+    tasks = SweepSpec(runs=4, seed=3).tasks()
+    assert [t.index for t in tasks] == list(range(36))
+    assert [(t.c, t.eps, t.run) for t in tasks] == [
+        (c, e, r) for c in (0.25, 0.5, 0.75) for e in (0.0025, 0.005, 0.0075) for r in range(4)
+    ]
+    assert len({t.seed for t in tasks}) == 36
+
+
+def test_seeds_depend_only_on_base_seed():
+    assert SweepSpec(seed=5).tasks() == SweepSpec(seed=5).tasks()
+    assert [t.seed for t in SweepSpec(seed=5).tasks()] != [t.seed for t in SweepSpec().tasks()]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"cs": ()}, "cs must hold at least one"),
+        ({"cs": (0.5, 0.5)}, "repeated"),
+        ({"cs": (1.5,)}, r"cs must lie in \[0, 1\]"),
+        ({"epss": (-0.1,)}, "epss must be finite and >= 0"),
+        ({"epss": (math.inf,)}, "epss must be finite"),
+        ({"runs": 0}, "runs must be a whole number >= 1"),
+        ({"seed": -1}, "seed must be a whole number >= 0"),
+    ],
+)
+def test_spec_rejects_bad_input(kwargs, match):
+    with pytest.raises(SweepError, match=match):
+        SweepSpec(**kwargs)
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@pytest.mark.parametrize("n", [2, 3, 10])
+def test_mean_ci_matches_scipy(n):
+    y = np.random.default_rng(n).normal(50.0, 8.0, n)
+    ci = mean_ci(y)
+    low, high = stats.t.interval(0.95, n - 1, loc=y.mean(), scale=stats.sem(y))
+    assert ci.mean == pytest.approx(y.mean())
+    assert (ci.low, ci.high) == pytest.approx((low, high), rel=1e-12)
+    ci90 = mean_ci(y, level=0.9)
+    assert (ci90.low, ci90.high) == pytest.approx(
+        stats.t.interval(0.9, n - 1, loc=y.mean(), scale=stats.sem(y)), rel=1e-12
+    )
+
+
+def test_mean_ci_small_and_bad_samples():
+    one = mean_ci([4.0])
+    assert one.mean == 4.0 and math.isnan(one.half_width) and one.n == 1
+    empty = mean_ci([])
+    assert math.isnan(empty.mean) and empty.n == 0
+    with pytest.raises(SweepError, match="finite"):
+        mean_ci([1.0, math.nan])
+    with pytest.raises(SweepError, match="level"):
+        mean_ci([1.0, 2.0], level=1.0)
+
+
+def test_summaries_match_the_rows(serial):
+    assert len(serial.rows) == SMALL.n_runs
+    for cell in serial.cells:
+        group = [r for r in serial.rows if (r.c, r.eps) == (cell.c, cell.eps)]
+        assert len(group) == SMALL.runs == cell.n
+        rewards = np.array([r.reward for r in group])
+        steps = np.array([r.steps for r in group], dtype=float)
+        assert cell.reward.mean == pytest.approx(rewards.mean())
+        assert (cell.steps.low, cell.steps.high) == pytest.approx(
+            stats.t.interval(0.95, 2, loc=steps.mean(), scale=stats.sem(steps))
+        )
+        assert cell.successes == sum(r.outcome == "success" for r in group)
+        assert sum(cell.outcomes.values()) == cell.n
+        assert cell.success_rate == cell.successes / cell.n
+        assert cell.paper == PAPER_TABLE_I[(cell.c, cell.eps)]
+
+
+def test_summarize_without_spec_finds_the_cells(serial):
+    cells = summarize(serial.rows)
+    assert [(s.c, s.eps) for s in cells] == SMALL.cells
+    assert [s.reward.mean for s in cells] == [s.reward.mean for s in serial.cells]
+
+
+# --------------------------------------------------------------------------- running
+
+
+def test_rows_follow_the_tasks(serial, scenario):
+    tasks = SMALL.tasks()
+    for task, row in zip(tasks, serial.rows, strict=True):
+        assert (row.c, row.eps, row.p_rl_ee, row.run, row.seed) == (
+            task.c,
+            task.eps,
+            task.c,
+            task.run,
+            task.seed,
+        )
+        end = fake_run(
+            scenario.with_runner(p_rl_ee=task.c, c=task.c, eps=task.eps, seed=task.seed, runs=1),
+            task.seed,
+            task.run,
+        )
+        assert row == SweepRow.from_run_end(task, end)
+    assert serial.scenario == "a" and serial.backend == "serial" and serial.workers == 1
+
+
+def test_same_seed_same_table_other_seed_other_table(serial, scenario):
+    again = run_sweep(scenario, SMALL, run=fake_run, backend="serial")
+    assert again.rows == serial.rows
+    other = run_sweep(scenario, SweepSpec(SMALL.cs, SMALL.epss, SMALL.runs, seed=8), run=fake_run)
+    assert other.rows != serial.rows
+
+
+def test_progress_callback(scenario):
+    calls = []
+    spec = SweepSpec(cs=(0.5,), epss=(0.005,), runs=3)
+    result = run_sweep(scenario, spec, run=fake_run, progress=lambda *a: calls.append(a))
+    assert [(d, t) for d, t, _ in calls] == [(1, 3), (2, 3), (3, 3)]
+    assert sorted((row for *_, row in calls), key=lambda r: r.run) == list(result.rows)
+
+
+def test_process_backend_equals_serial(serial, scenario):
+    calls = []
+    par = run_sweep(
+        scenario,
+        SMALL,
+        run=fake_run,
+        backend="process",
+        workers=2,
+        progress=lambda d, t, row: calls.append(d),
+    )
+    assert par.rows == serial.rows
+    assert par.cells == serial.cells
+    assert par.backend == "process" and par.workers == 2
+    assert calls == list(range(1, SMALL.n_runs + 1))
+
+
+def test_process_backend_reraises_a_failing_run(scenario):
+    with pytest.raises(TypeError, match="must return a RunEnd"):
+        run_sweep(
+            scenario,
+            SweepSpec(cs=(0.5,), epss=(0.005,), runs=2),
+            run=returns_none,
+            backend="process",
+            workers=2,
+        )
+
+
+def test_bad_backend_and_workers(scenario):
+    with pytest.raises(SweepBackendError, match="unknown backend 'threads'"):
+        run_sweep(scenario, SMALL, run=fake_run, backend="threads")
+    with pytest.raises(SweepError, match="workers"):
+        run_sweep(scenario, SMALL, run=fake_run, backend="process", workers=0)
+
+
+def test_ray_missing_gives_a_clear_error(scenario, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # makes `import ray` fail
+    with pytest.raises(SweepBackendError, match=r"pip install 'hopnav\[ray\]'"):
+        run_sweep(scenario, SMALL, run=fake_run, backend="ray")
+
+
+def test_ray_backend_two_runs_equal_serial(scenario):
+    pytest.importorskip("ray")
+    spec = SweepSpec(cs=(0.5,), epss=(0.005,), runs=2, seed=11)
+    remote = run_sweep(scenario, spec, run=fake_run, backend="ray", workers=1)
+    local = run_sweep(scenario, spec, run=fake_run, backend="serial")
+    assert remote.rows == local.rows
+    assert len(remote.rows) == 2
+
+
+# --------------------------------------------------------------------------- files
+
+
+def test_write_outputs_round_trip(serial, tmp_path):
+    paths = write_outputs(serial, tmp_path / "out")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
+        [sw.ROWS_FILE, sw.SUMMARY_FILE, sw.MARKDOWN_FILE]
+    )
+    assert read_rows_csv(paths["rows"]) == list(serial.rows)
+    header = paths["rows"].read_text().splitlines()[0]
+    assert header == ",".join(ROW_COLUMNS)
+    # a violation has no switch: an empty field, read back as None
+    assert any(r.switch_step is None for r in read_rows_csv(paths["rows"]))
+
+    summary = list(csv.DictReader(io.StringIO(paths["summary"].read_text())))
+    assert [(float(r["c"]), float(r["eps"])) for r in summary] == SMALL.cells
+    for rec, cell in zip(summary, serial.cells, strict=True):
+        assert float(rec["reward_mean"]) == cell.reward.mean
+        assert float(rec["steps_ci_low"]) == cell.steps.low
+        assert float(rec["steps_ci_high"]) == cell.steps.high
+        assert int(rec["n"]) == SMALL.runs
+        assert float(rec["success_rate"]) == cell.success_rate
+        assert float(rec["paper_reward"]) == cell.paper[0]
+
+
+def test_markdown_has_table_i_layout(serial, tmp_path):
+    md = write_outputs(serial, tmp_path)["markdown"].read_text()
+    lines = md.splitlines()
+    header = next(ln for ln in lines if ln.startswith("| P_RL,ee = C"))
+    assert header == "| P_RL,ee = C | eps = 0.0025 | eps = 0.0075 |"
+    cell = serial.cell(0.75, 0.0075)
+    entry = (
+        f"{cell.reward.mean:.1f} ± {cell.reward.half_width:.1f} / "
+        f"{cell.steps.mean:.1f} ± {cell.steps.half_width:.1f} ({cell.successes}/3)"
+    )
+    row = next(ln for ln in lines if ln.startswith("| 0.75 |") and "±" in ln)
+    assert row.endswith(f"| {entry} |")
+    assert "| 0.25 | 61.2/98 | 54.6/65.1 |" in lines
+    assert "| 0.75 | 136.4/84.7 | 129.6/85.3 |" in lines
+
+
+def test_printed_table_shows_measured_and_paper(serial):
+    text = sw.format_table(serial)
+    assert "[paper 139.75/83]" not in text  # eps = 0.005 is not in SMALL
+    assert "[paper 61.2/98]" in text and "[paper 129.6/85.3]" in text
+    assert text.split("\n", 1)[1].count("±") == 2 * len(serial.cells)  # below the title
+
+
+def test_atomic_write_keeps_old_file_on_failure(tmp_path):
+    path = tmp_path / "t.csv"
+    sw.atomic_write_text(path, "old\n")
+    with pytest.raises(TypeError):
+        sw.atomic_write_text(path, None)  # type: ignore[arg-type]
+    assert path.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
+
+
+def test_read_rows_csv_names_the_problem(serial, tmp_path):
+    good = sw.rows_csv(serial.rows).splitlines()
+    bad = tmp_path / "bad.csv"
+    fields = good[2].split(",")
+    fields[ROW_COLUMNS.index("steps")] = "many"
+    bad.write_text("\n".join([good[0], good[1], ",".join(fields)]) + "\n")
+    with pytest.raises(SweepFileError, match=r"bad\.csv:3: column 'steps'"):
+        read_rows_csv(bad)
+    fields = good[1].split(",")
+    fields[ROW_COLUMNS.index("outcome")] = "won"
+    bad.write_text("\n".join([good[0], ",".join(fields)]) + "\n")
+    with pytest.raises(SweepFileError, match=r"bad\.csv:2: column 'outcome': must be one of"):
+        read_rows_csv(bad)
+    cut = tmp_path / "cut.csv"
+    cut.write_text(good[0].replace(",reward", "") + "\n")
+    with pytest.raises(SweepFileError, match=r"cut\.csv:1: missing column\(s\) \['reward'\]"):
+        read_rows_csv(cut)
+    with pytest.raises(SweepFileError, match="cannot read"):
+        read_rows_csv(tmp_path / "absent.csv")
+
+
+def test_json_has_no_nan(scenario):
+    one = run_sweep(scenario, SweepSpec(cs=(0.5,), epss=(0.005,), runs=1), run=fake_run)
+    text = json.dumps(one.to_json(), allow_nan=False)
+    record = json.loads(text)
+    assert record["cells"][0]["reward_ci_low"] is None  # one run: no interval
+    assert record["cells"][0]["paper_reward"] == 88.9
+
+
+# --------------------------------------------------------------------------- command
+
+
+def test_command_writes_table_and_json(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sw, "default_run_function", lambda: fake_run)
+    out = tmp_path / "sweep"
+    args = ["sweep", "--runs", "2", "--seed", "4", "--backend", "serial", "--out", str(out)]
+    assert hopnav([*args, "--cs", "0.25,0.5", "--epss", "0.005", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["scenario"] == "a" and record["runs"] == 2 and record["seed"] == 4
+    assert [(c["c"], c["eps"]) for c in record["cells"]] == [(0.25, 0.005), (0.5, 0.005)]
+    assert len(record["rows"]) == 4
+    assert record["files"]["rows"] == str(out / sw.ROWS_FILE)
+    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 4
+
+    assert hopnav(args) == 0
+    text = capsys.readouterr().out
+    assert "P_RL,ee = C" in text and "[paper 139.75/83]" in text
+    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 18
+
+
+def test_command_errors(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sw, "default_run_function", lambda: fake_run)
+    assert hopnav(["sweep", "--scenario", str(tmp_path / "none.toml")]) == 2
+    assert "no scenario" in capsys.readouterr().err
+    assert hopnav(["sweep", "--runs", "0", "--out", str(tmp_path)]) == 2
+    assert "runs must be" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "ray", None)
+    assert hopnav(["sweep", "--backend", "ray", "--out", str(tmp_path)]) == 2
+    assert "hopnav[ray]" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
