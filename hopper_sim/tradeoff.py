@@ -80,10 +80,10 @@ def slope_ci(
     n = xa.size
     if n < 3:
         raise TrendDataError(f"a slope with a confidence interval needs >= 3 points, got {n}")
+    if np.all(xa == xa[0]):
+        raise TrendDataError(f"all x values are equal ({xa[0]:g}): no slope")
     dx = xa - xa.mean()
     sxx = float(dx @ dx)
-    if sxx <= 0.0:
-        raise TrendDataError(f"all x values are equal ({xa[0]:g}): no slope")
     b = float(dx @ (ya - ya.mean())) / sxx
     resid = ya - ya.mean() - b * dx
     se = math.sqrt(float(resid @ resid) / (n - 2) / sxx)
