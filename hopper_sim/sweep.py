@@ -491,7 +491,16 @@ def _iter_ray(
     started = False
     if not ray.is_initialized():
         if address is None:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            # Local workers import this project from its source tree even when it is not
+            # installed; remote clusters need it installed (pip install 'hopnav[ray]').
+            root = str(Path(__file__).resolve().parents[1])
+            path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
+            ray.init(
+                num_cpus=workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                runtime_env={"env_vars": {"PYTHONPATH": path, **dict.fromkeys(_THREAD_VARS, "1")}},
+            )
         else:
             ray.init(address=address, log_to_driver=False)
         started = True
