@@ -403,6 +403,14 @@ def _json_safe(value: Any) -> Any:
 # --------------------------------------------------------------------------- running
 
 
+def available_cores() -> int:
+    """CPU cores this process may use (its affinity set where the OS reports one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        return os.cpu_count() or 1
+
+
 def default_run_function() -> RunFunction:
     """The real navigation run, :func:`hopper_sim.runner.run_single` (imported now).
 
@@ -528,6 +536,7 @@ def run_sweep(
     workers: int | None = None,
     ray_address: str | None = None,
     progress: ProgressCallback | None = None,
+    previous: Iterable[SweepRow] = (),
     level: float = 0.95,
 ) -> SweepResult:
     """Run every ``(C, eps, run)`` of ``spec`` on ``scenario`` and summarise the results.
@@ -544,7 +553,10 @@ def run_sweep(
         backend: ``"serial"``, ``"process"`` or ``"ray"``.
         workers: parallel workers for ``process``/``ray`` (default: the machine's cores).
         ray_address: address of a running Ray cluster; ``None`` starts a local instance.
-        progress: called as ``progress(done, total, row)`` after each finished run.
+        progress: called as ``progress(done, total, row)`` after each run finished in this
+            call (``total``: the runs this call makes, reused ones not counted).
+        previous: rows of an earlier, interrupted sweep: a task whose cell, run number and
+            seed match one of them is not run again and its row is reused (resume).
         level: confidence level of the intervals.
 
     Raises:
@@ -559,24 +571,31 @@ def run_sweep(
     if backend == "ray":
         _import_ray()  # fail before any work when ray is missing
     if workers is None:
-        workers = os.cpu_count() or 1
+        workers = available_cores()
     if int(workers) != workers or workers < 1:
         raise SweepError(f"workers must be a whole number >= 1, got {workers}")
     workers = 1 if backend == "serial" else int(workers)
-    run = default_run_function() if run is None else run
     tasks = spec.tasks()
-    if backend == "serial":
-        stream = _iter_serial(run, scenario, tasks)
-    elif backend == "process":
-        stream = _iter_process(run, scenario, tasks, workers)
-    else:
-        stream = _iter_ray(run, scenario, tasks, workers, ray_address)
-    t0 = time.perf_counter()
     results: list[SweepRow | None] = [None] * len(tasks)
+    known = {(r.c, r.eps, r.run, r.seed): r for r in previous}
+    for t in tasks:
+        results[t.index] = known.get((t.c, t.eps, t.run, t.seed))
+    todo = [t for t in tasks if results[t.index] is None]
+    if run is None and todo:
+        run = default_run_function()
+    if backend == "serial":
+        stream = _iter_serial(run, scenario, todo)
+    elif not todo:
+        stream = iter(())
+    elif backend == "process":
+        stream = _iter_process(run, scenario, todo, min(workers, len(todo)))
+    else:
+        stream = _iter_ray(run, scenario, todo, workers, ray_address)
+    t0 = time.perf_counter()
     for done, (task, row) in enumerate(stream, start=1):
         results[task.index] = row
         if progress is not None:
-            progress(done, len(tasks), row)
+            progress(done, len(todo), row)
     rows = tuple(r for r in results if r is not None)
     return SweepResult(
         scenario=scenario.name,

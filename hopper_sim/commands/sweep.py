@@ -8,14 +8,25 @@ the table beside the paper's and writes ``sweep_runs.csv`` (one row per run),
 ``sweep_summary.csv`` (per cell, 95 % Student-t intervals) and ``table_i.md`` to ``--out``.
 The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
 number of workers.
+
+``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted sweep
+leaves the runs it finished; ``--resume`` reuses them (same scenario file, checked through
+``sweep_meta.json``; a run is reused when its cell, run number and seed match) and runs the
+rest.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+META_FILE = "sweep_meta.json"
 
 
 def _levels(text: str) -> tuple[float, ...]:
@@ -48,6 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default=os.path.join("runs", "sweep"), help="[runs/sweep]")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--resume", action="store_true", help="reuse the finished runs found in --out")
     p.set_defaults(func=run)
 
 
@@ -57,27 +69,45 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.sweep import (
         PAPER_CS,
         PAPER_EPSS,
+        ROWS_FILE,
         SweepBackendError,
         SweepError,
+        SweepFileError,
+        SweepRow,
         SweepSpec,
+        atomic_write_text,
         format_table,
+        read_rows_csv,
+        rows_csv,
         run_sweep,
         write_outputs,
     )
     from planner.errors import ScenarioError
-    from planner.scenario import load_scenario
+    from planner.scenario import load_scenario, resolve_scenario_path
 
+    out = Path(args.out)
     try:
         scenario = load_scenario(args.scenario)
+        digest = hashlib.sha256(resolve_scenario_path(args.scenario).read_bytes()).hexdigest()
         spec = SweepSpec(
             cs=args.cs or PAPER_CS, epss=args.epss or PAPER_EPSS, runs=args.runs, seed=args.seed
         )
-    except (ScenarioError, SweepError) as err:
+        previous = _previous_rows(out, scenario.name, digest, read_rows_csv) if args.resume else []
+    except (ScenarioError, SweepError, SweepFileError) as err:
         print(f"hopnav sweep: {err}", file=sys.stderr)
         return 2
+    order = {(t.c, t.eps, t.run, t.seed): t.index for t in spec.tasks()}
+    finished: list[SweepRow] = [r for r in previous if (r.c, r.eps, r.run, r.seed) in order]
     bar = tqdm(total=spec.n_runs, unit="run", desc=f"sweep {scenario.name}", disable=args.json)
 
-    def progress(done: int, total: int, row: object) -> None:
+    def progress(done: int, total: int, row: SweepRow) -> None:
+        if done == 1:
+            bar.update(spec.n_runs - total - bar.n)  # the reused runs
+            meta = {"scenario": scenario.name, "scenario_sha256": digest}
+            atomic_write_text(out / META_FILE, json.dumps(meta, indent=2) + "\n")
+        finished.append(row)
+        finished.sort(key=lambda r: order[(r.c, r.eps, r.run, r.seed)])
+        atomic_write_text(out / ROWS_FILE, rows_csv(finished))
         bar.update(1)
         bar.set_postfix_str(f"C={row.c:g} eps={row.eps:g} {row.outcome} {row.steps} hops")
 
@@ -89,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             ray_address=args.ray_address,
             progress=progress,
+            previous=previous,
         )
     except (SweepBackendError, SweepError) as err:
         print(f"hopnav sweep: {err}", file=sys.stderr)
@@ -109,3 +140,28 @@ def run(args: argparse.Namespace) -> int:
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0
+
+
+def _previous_rows(
+    out: Path, name: str, digest: str, read_rows: Callable[[Path], list[Any]]
+) -> list[Any]:
+    """The finished rows in ``out`` for ``--resume``; empty if there are none.
+
+    Raises:
+        SweepError: the rows in ``out`` belong to another scenario file.
+    """
+    from hopper_sim.sweep import ROWS_FILE, SweepError
+
+    rows_path, meta_path = out / ROWS_FILE, out / META_FILE
+    if not rows_path.is_file():
+        return []
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise SweepError(f"cannot resume: {meta_path} is missing or unreadable ({err})") from err
+    if meta.get("scenario_sha256") != digest:
+        raise SweepError(
+            f"cannot resume: the runs in {out} are of scenario {meta.get('scenario')!r} from "
+            f"another scenario file than {name!r}; use another --out"
+        )
+    return read_rows(rows_path)

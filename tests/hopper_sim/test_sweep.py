@@ -34,7 +34,7 @@ from hopper_sim.sweep import (
     summarize,
     write_outputs,
 )
-from planner.scenario import load_scenario
+from planner.scenario import load_scenario, resolve_scenario_path
 
 SMALL = SweepSpec(cs=(0.25, 0.75), epss=(0.0025, 0.0075), runs=3, seed=7)
 
@@ -371,3 +371,64 @@ def test_command_errors(tmp_path, monkeypatch, capsys):
     assert hopnav(["sweep", "--backend", "ray", "--out", str(tmp_path)]) == 2
     assert "hopnav[ray]" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+# --------------------------------------------------------------------------- resume
+
+
+def counting(calls: list, fail_at: int | None = None):
+    """A serial-only run function that records its calls and fails at call ``fail_at``."""
+
+    def run(scenario, seed, run_index):
+        if fail_at is not None and len(calls) + 1 == fail_at:
+            raise RuntimeError("interrupted")
+        calls.append(seed)
+        return fake_run(scenario, seed, run_index)
+
+    return run
+
+
+def test_previous_rows_are_reused(serial, scenario):
+    calls: list = []
+    done: list = []
+    half = serial.rows[::2]
+    result = run_sweep(
+        scenario,
+        SMALL,
+        run=counting(calls),
+        previous=half,
+        progress=lambda d, t, row: done.append((d, t)),
+    )
+    assert result.rows == serial.rows
+    assert sorted(calls) == sorted(r.seed for r in serial.rows[1::2])
+    assert done[-1] == (len(serial.rows) - len(half),) * 2
+    stale = [SweepRow(**{**r.__dict__, "seed": r.seed + 1}) for r in serial.rows]
+    calls.clear()
+    assert run_sweep(scenario, SMALL, run=counting(calls), previous=stale).rows == serial.rows
+    assert len(calls) == SMALL.n_runs  # other seeds: nothing reused
+
+
+def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--runs", "2", "--cs", "0.25,0.75", "--epss", "0.005", "--json"]
+    args += ["--backend", "serial", "--out", str(out)]
+    calls: list = []
+    monkeypatch.setattr(sw, "default_run_function", lambda: counting(calls, fail_at=3))
+    with pytest.raises(RuntimeError, match="interrupted"):
+        hopnav(args)
+    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 2  # the finished runs were kept
+    assert not (out / sw.SUMMARY_FILE).exists()
+
+    calls.clear()
+    monkeypatch.setattr(sw, "default_run_function", lambda: counting(calls))
+    assert hopnav([*args, "--resume"]) == 0
+    resumed = json.loads(capsys.readouterr().out)
+    assert len(calls) == 2
+    assert hopnav(args) == 0  # from scratch
+    fresh = json.loads(capsys.readouterr().out)
+    assert resumed["rows"] == fresh["rows"] and resumed["cells"] == fresh["cells"]
+
+    other = tmp_path / "other.toml"
+    other.write_text(resolve_scenario_path("a").read_text() + "\n# edited\n")
+    assert hopnav([*args, "--resume", "--scenario", str(other)]) == 2
+    assert "cannot resume" in capsys.readouterr().err
