@@ -69,17 +69,19 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.sweep import (
         PAPER_CS,
         PAPER_EPSS,
-        ROWS_FILE,
         SweepBackendError,
         SweepError,
-        SweepFileError,
         SweepRow,
         SweepSpec,
+        run_sweep,
+    )
+    from hopper_sim.sweep_files import (
+        ROWS_FILE,
+        SweepFileError,
         atomic_write_text,
         format_table,
         read_rows_csv,
         rows_csv,
-        run_sweep,
         write_outputs,
     )
     from planner.errors import ScenarioError
@@ -150,7 +152,8 @@ def _previous_rows(
     Raises:
         SweepError: the rows in ``out`` belong to another scenario file.
     """
-    from hopper_sim.sweep import ROWS_FILE, SweepError
+    from hopper_sim.sweep import SweepError
+    from hopper_sim.sweep_files import ROWS_FILE
 
     rows_path, meta_path = out / ROWS_FILE, out / META_FILE
     if not rows_path.is_file():

@@ -18,6 +18,7 @@ import pytest
 from scipy import stats
 
 from hopper_sim import sweep as sw
+from hopper_sim import sweep_files as sf
 from hopper_sim.cli import main as hopnav
 from hopper_sim.events import RunEnd
 from hopper_sim.sweep import (
@@ -25,15 +26,13 @@ from hopper_sim.sweep import (
     ROW_COLUMNS,
     SweepBackendError,
     SweepError,
-    SweepFileError,
     SweepRow,
     SweepSpec,
     mean_ci,
-    read_rows_csv,
     run_sweep,
     summarize,
-    write_outputs,
 )
+from hopper_sim.sweep_files import SweepFileError, read_rows_csv, write_outputs
 from planner.scenario import load_scenario, resolve_scenario_path
 
 SMALL = SweepSpec(cs=(0.25, 0.75), epss=(0.0025, 0.0075), runs=3, seed=7)
@@ -228,7 +227,7 @@ def test_process_backend_reraises_a_failing_run(scenario):
             SweepSpec(cs=(0.5,), epss=(0.005,), runs=2),
             run=returns_none,
             backend="process",
-            workers=2,
+            workers=1,
         )
 
 
@@ -260,7 +259,7 @@ def test_ray_backend_two_runs_equal_serial(scenario):
 def test_write_outputs_round_trip(serial, tmp_path):
     paths = write_outputs(serial, tmp_path / "out")
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
-        [sw.ROWS_FILE, sw.SUMMARY_FILE, sw.MARKDOWN_FILE]
+        [sf.ROWS_FILE, sf.SUMMARY_FILE, sf.MARKDOWN_FILE]
     )
     assert read_rows_csv(paths["rows"]) == list(serial.rows)
     header = paths["rows"].read_text().splitlines()[0]
@@ -296,7 +295,7 @@ def test_markdown_has_table_i_layout(serial, tmp_path):
 
 
 def test_printed_table_shows_measured_and_paper(serial):
-    text = sw.format_table(serial)
+    text = sf.format_table(serial)
     assert "[paper 139.75/83]" not in text  # eps = 0.005 is not in SMALL
     assert "[paper 61.2/98]" in text and "[paper 129.6/85.3]" in text
     assert text.split("\n", 1)[1].count("±") == 2 * len(serial.cells)  # below the title
@@ -304,15 +303,15 @@ def test_printed_table_shows_measured_and_paper(serial):
 
 def test_atomic_write_keeps_old_file_on_failure(tmp_path):
     path = tmp_path / "t.csv"
-    sw.atomic_write_text(path, "old\n")
+    sf.atomic_write_text(path, "old\n")
     with pytest.raises(TypeError):
-        sw.atomic_write_text(path, None)  # type: ignore[arg-type]
+        sf.atomic_write_text(path, None)  # type: ignore[arg-type]
     assert path.read_text() == "old\n"
     assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
 
 
 def test_read_rows_csv_names_the_problem(serial, tmp_path):
-    good = sw.rows_csv(serial.rows).splitlines()
+    good = sf.rows_csv(serial.rows).splitlines()
     bad = tmp_path / "bad.csv"
     fields = good[2].split(",")
     fields[ROW_COLUMNS.index("steps")] = "many"
@@ -352,13 +351,13 @@ def test_command_writes_table_and_json(tmp_path, monkeypatch, capsys):
     assert record["scenario"] == "a" and record["runs"] == 2 and record["seed"] == 4
     assert [(c["c"], c["eps"]) for c in record["cells"]] == [(0.25, 0.005), (0.5, 0.005)]
     assert len(record["rows"]) == 4
-    assert record["files"]["rows"] == str(out / sw.ROWS_FILE)
-    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 4
+    assert record["files"]["rows"] == str(out / sf.ROWS_FILE)
+    assert len(read_rows_csv(out / sf.ROWS_FILE)) == 4
 
     assert hopnav(args) == 0
     text = capsys.readouterr().out
     assert "P_RL,ee = C" in text and "[paper 139.75/83]" in text
-    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 18
+    assert len(read_rows_csv(out / sf.ROWS_FILE)) == 18
 
 
 def test_command_errors(tmp_path, monkeypatch, capsys):
@@ -416,8 +415,8 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sw, "default_run_function", lambda: counting(calls, fail_at=3))
     with pytest.raises(RuntimeError, match="interrupted"):
         hopnav(args)
-    assert len(read_rows_csv(out / sw.ROWS_FILE)) == 2  # the finished runs were kept
-    assert not (out / sw.SUMMARY_FILE).exists()
+    assert len(read_rows_csv(out / sf.ROWS_FILE)) == 2  # the finished runs were kept
+    assert not (out / sf.SUMMARY_FILE).exists()
 
     calls.clear()
     monkeypatch.setattr(sw, "default_run_function", lambda: counting(calls))

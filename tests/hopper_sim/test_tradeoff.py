@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hopper_sim.sweep import SweepRow, atomic_write_text, rows_csv
+from hopper_sim.sweep import SweepRow
+from hopper_sim.sweep_files import atomic_write_text, rows_csv
 from hopper_sim.tradeoff import (
     Slope,
     TrendDataError,
