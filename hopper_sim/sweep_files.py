@@ -151,7 +151,10 @@ def format_table(result: SweepResult) -> str:
 
     grid = _grid(result, both)
     widths = [max(len(row[k]) for row in grid) for k in range(len(grid[0]))]
-    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in grid]
+    lines = [
+        "  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()
+        for row in grid
+    ]
     lines.insert(1, "  ".join("-" * w for w in widths))
     level = _level_pct(result)
     title = (

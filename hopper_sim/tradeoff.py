@@ -169,7 +169,7 @@ def check_tradeoff(
 
 def format_trends(trends: Sequence[Trend]) -> str:
     """A plain-text table of the trends: slope, its CI, the prediction and the verdict."""
-    head = ["trend", "predicted", "slope", "CI", "n", "verdict"]
+    head = ["trend", "predicted", "slope (y per unit x)", "CI", "n", "verdict"]
     body = []
     for t in trends:
         pred = "decreasing" if t.predicted_sign < 0 else "increasing"
