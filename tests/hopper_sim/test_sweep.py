@@ -431,3 +431,9 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     other.write_text(resolve_scenario_path("a").read_text() + "\n# edited\n")
     assert hopnav([*args, "--resume", "--scenario", str(other)]) == 2
     assert "cannot resume" in capsys.readouterr().err
+
+
+def test_default_run_function_needs_the_runner(monkeypatch):
+    monkeypatch.setitem(sys.modules, "hopper_sim.runner", None)  # as if not installed
+    with pytest.raises(SweepBackendError, match=r"hopper_sim\.runner is not available"):
+        sw.default_run_function()

@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from hopper_sim.sweep import SweepRow
-from hopper_sim.sweep_files import atomic_write_text, rows_csv
+from hopper_sim.sweep_files import atomic_write_text, read_rows_csv, rows_csv
 from hopper_sim.tradeoff import (
     Slope,
     TrendDataError,
@@ -130,3 +130,20 @@ def test_benchmark_script_reads_a_sweep_csv(tmp_path):
         check=False,
     )
     assert missing.returncode == 2 and "cannot read" in missing.stderr
+
+
+def test_benchmark_script_runs_a_sweep_when_asked(tmp_path, monkeypatch, capsys):
+    import runpy
+
+    from hopper_sim import sweep
+    from tests.hopper_sim.test_sweep import fake_run
+
+    monkeypatch.setattr(sweep, "default_run_function", lambda: fake_run)
+    script = runpy.run_path(str(ROOT / "benchmarks" / "tradeoff.py"), run_name="tradeoff")
+    csv_path = tmp_path / "sweep" / "sweep_runs.csv"
+    args = [str(csv_path), "--run", "--runs", "2", "--backend", "serial", "--seed", "3"]
+    assert script["main"](args) == 0
+    out = capsys.readouterr().out
+    assert f"18 runs from {csv_path}" in out
+    assert "steps vs eps at C = 0.25" in out and "reward vs C, all eps pooled" in out
+    assert len(read_rows_csv(csv_path)) == 18
