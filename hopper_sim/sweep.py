@@ -81,6 +81,10 @@ class SweepBackendError(RuntimeError):
     """A backend cannot run (unknown name, or its optional package is missing)."""
 
 
+class SweepRunError(RuntimeError):
+    """One run of the sweep failed; the message names its cell, run number and seed."""
+
+
 # --------------------------------------------------------------------------- the grid
 
 
@@ -439,10 +443,16 @@ def default_run_function() -> RunFunction:
 
 
 def _run_task(run: RunFunction, scenario: Scenario, task: SweepTask) -> SweepRow:
+    where = f"run {task.run} of cell C={task.c:g}, eps={task.eps:g} (seed {task.seed})"
     sc = scenario.with_runner(p_rl_ee=task.c, c=task.c, eps=task.eps, seed=task.seed, runs=1)
-    end = run(sc, task.seed, task.run)
+    try:
+        end = run(sc, task.seed, task.run)
+    except Exception as err:
+        raise SweepRunError(f"{where} failed: {type(err).__name__}: {err}") from err
     if not isinstance(end, RunEnd):
-        raise TypeError(f"the run function must return a RunEnd, got {type(end).__name__}")
+        raise SweepRunError(
+            f"{where}: the run function must return a RunEnd, got {type(end).__name__}"
+        )
     return SweepRow.from_run_end(task, end)
 
 
@@ -571,6 +581,8 @@ def run_sweep(
     Raises:
         SweepBackendError: unknown backend, or ``ray`` requested but not installed.
         SweepError: ``workers < 1``.
+        SweepRunError: a run raised or returned something else than a ``RunEnd`` (the
+            runs finished before it were passed to ``progress``).
     """
     import time
 

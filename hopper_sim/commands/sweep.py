@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         SweepBackendError,
         SweepError,
         SweepRow,
+        SweepRunError,
         SweepSpec,
         run_sweep,
     )
@@ -126,6 +127,13 @@ def run(args: argparse.Namespace) -> int:
     except (SweepBackendError, SweepError) as err:
         print(f"hopnav sweep: {err}", file=sys.stderr)
         return 2
+    except SweepRunError as err:
+        print(
+            f"hopnav sweep: {err}\nhopnav sweep: the {len(finished)} finished runs are in "
+            f"{out / ROWS_FILE}; after a fix, add --resume to run only the others",
+            file=sys.stderr,
+        )
+        return 1
     finally:
         bar.close()
     paths = write_outputs(result, args.out)

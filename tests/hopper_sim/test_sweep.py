@@ -27,6 +27,7 @@ from hopper_sim.sweep import (
     SweepBackendError,
     SweepError,
     SweepRow,
+    SweepRunError,
     SweepSpec,
     mean_ci,
     run_sweep,
@@ -221,7 +222,10 @@ def test_process_backend_equals_serial(serial, scenario):
 
 
 def test_process_backend_reraises_a_failing_run(scenario):
-    with pytest.raises(TypeError, match="must return a RunEnd"):
+    with pytest.raises(
+        SweepRunError,
+        match=r"run [01] of cell C=0\.5, eps=0\.005 \(seed \d+\): .* must return a RunEnd",
+    ):
         run_sweep(
             scenario,
             SweepSpec(cs=(0.5,), epss=(0.005,), runs=2),
@@ -413,8 +417,9 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     args += ["--backend", "serial", "--out", str(out)]
     calls: list = []
     monkeypatch.setattr(sw, "default_run_function", lambda: counting(calls, fail_at=3))
-    with pytest.raises(RuntimeError, match="interrupted"):
-        hopnav(args)
+    assert hopnav(args) == 1
+    err = capsys.readouterr().err
+    assert "RuntimeError: interrupted" in err and "the 2 finished runs are in" in err
     assert len(read_rows_csv(out / sf.ROWS_FILE)) == 2  # the finished runs were kept
     assert not (out / sf.SUMMARY_FILE).exists()
 
