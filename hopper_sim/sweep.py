@@ -171,7 +171,8 @@ class SweepRow:
     """The result of one run (one line of the raw CSV).
 
     ``p_rl_ee`` equals ``c`` in a Table I sweep; ``switch_step`` and ``p_switch`` are ``None``
-    when goal reaching never began; ``seconds`` is the run's wall-clock time.
+    when goal reaching never began; ``seconds`` is the run's wall-clock time; ``reason`` says
+    in words what ended the run (the runner's ``RunEnd.reason``, empty if it gives none).
     """
 
     c: float
@@ -186,6 +187,7 @@ class SweepRow:
     p_switch: float | None
     backups: int
     seconds: float
+    reason: str = ""
 
     @classmethod
     def from_run_end(cls, task: SweepTask, end: RunEnd) -> SweepRow:
@@ -203,10 +205,12 @@ class SweepRow:
             p_switch=None if end.p_switch is None else float(end.p_switch),
             backups=int(end.backups),
             seconds=float(end.seconds),
+            reason=str(getattr(end, "reason", "")),  # RunEnd.reason: what ended the run
         )
 
 
 ROW_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(SweepRow))
+"""Columns of the raw-rows CSV (``reason`` may be absent from files of older versions)."""
 
 
 # --------------------------------------------------------------------------- statistics

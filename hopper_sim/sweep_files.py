@@ -12,6 +12,7 @@ import io
 import math
 import os
 import tempfile
+from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -161,6 +162,10 @@ def format_table(result: SweepResult) -> str:
         f"Table I, scenario {result.scenario}: reward / steps (± {level} % CI half-width), "
         f"(successes/runs); {result.spec.runs} runs per cell, seed {result.spec.seed}"
     )
+    reasons = Counter(r.reason for r in result.rows if r.reason)
+    if reasons:
+        ended = ", ".join(f"{n} x {why}" for why, n in reasons.most_common())
+        lines.append(f"runs ended by: {ended}")
     return "\n".join([title, *lines])
 
 
@@ -200,7 +205,9 @@ def write_outputs(result: SweepResult, out_dir: str | Path) -> dict[str, Path]:
 
 
 def _parse_field(name: str, text: str) -> Any:
-    if name in ("outcome",):
+    if name == "reason":
+        return text
+    if name == "outcome":
         if text not in OUTCOMES:
             raise ValueError(f"must be one of {OUTCOMES}, got {text!r}")
         return text
@@ -214,6 +221,9 @@ def _parse_field(name: str, text: str) -> Any:
     if not math.isfinite(value):
         raise ValueError(f"must be finite, got {text!r}")
     return value
+
+
+_OPTIONAL = ("reason",)
 
 
 def read_rows_csv(path: str | Path) -> list[SweepRow]:
@@ -231,7 +241,7 @@ def read_rows_csv(path: str | Path) -> list[SweepRow]:
         raise SweepFileError(f"{path}: cannot read: {err}") from err
     reader = csv.DictReader(io.StringIO(text))
     header = reader.fieldnames or []
-    missing = [c for c in ROW_COLUMNS if c not in header]
+    missing = [c for c in ROW_COLUMNS if c not in header and c not in _OPTIONAL]
     if missing:
         raise SweepFileError(f"{path}:1: missing column(s) {missing} (need {list(ROW_COLUMNS)})")
     rows = []
@@ -240,6 +250,8 @@ def read_rows_csv(path: str | Path) -> list[SweepRow]:
         values = {}
         for name in ROW_COLUMNS:
             raw = record.get(name)
+            if raw is None and name in _OPTIONAL and name not in header:
+                continue
             if raw is None:
                 raise SweepFileError(f"{path}:{line}: column '{name}': the line is too short")
             try:

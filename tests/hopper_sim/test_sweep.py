@@ -8,6 +8,7 @@ can be checked exactly. The shipped command uses the real runner.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -49,7 +50,7 @@ def fake_run(scenario, seed: int, run_index: int) -> RunEnd:
     reward = float(100 * r.c + rng.normal(0.0, 5.0))
     outcome = ("success", "success", "violation", "timeout")[seed % 4]
     switch = None if outcome == "violation" else steps // 2
-    return RunEnd(
+    end = RunEnd(
         run_index=run_index,
         outcome=outcome,
         steps=steps,
@@ -59,6 +60,9 @@ def fake_run(scenario, seed: int, run_index: int) -> RunEnd:
         backups=seed % 3,
         seconds=0.0,
     )
+    if hasattr(end, "reason"):  # RunEnd.reason is newer than this test
+        end = dataclasses.replace(end, reason=f"ended, {outcome}")
+    return end
 
 
 def returns_none(scenario, seed: int, run_index: int) -> None:
@@ -442,3 +446,34 @@ def test_default_run_function_needs_the_runner(monkeypatch):
     monkeypatch.setitem(sys.modules, "hopper_sim.runner", None)  # as if not installed
     with pytest.raises(SweepBackendError, match=r"hopper_sim\.runner is not available"):
         sw.default_run_function()
+
+
+def test_reason_is_kept_and_optional_in_files(serial, tmp_path):
+    from types import SimpleNamespace
+
+    task = SMALL.tasks()[0]
+    end = SimpleNamespace(
+        **fake_run(
+            load_scenario("a").with_runner(p_rl_ee=task.c, c=task.c, eps=task.eps, seed=task.seed),
+            task.seed,
+            0,
+        ).__dict__
+    )
+    end.reason = "hop failed: no_touchdown, at x = 3"
+    row = SweepRow.from_run_end(task, end)
+    assert row.reason == "hop failed: no_touchdown, at x = 3"
+    rows = [row, *serial.rows[1:]]
+    path = sf.atomic_write_text(tmp_path / "r.csv", sf.rows_csv(rows))
+    assert read_rows_csv(path) == rows  # a comma inside the reason survives
+    # a file without the reason column (older version) reads with empty reasons
+    records = list(csv.reader(io.StringIO(sf.rows_csv(serial.rows))))
+    assert records[0][-1] == "reason"
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rec[:-1] for rec in records)
+    old = sf.atomic_write_text(tmp_path / "old.csv", buf.getvalue())
+    expected = [dataclasses.replace(r, reason="") for r in serial.rows]
+    assert read_rows_csv(old) == expected
+
+    result = dataclasses.replace(serial, rows=tuple(rows))
+    ended = sf.format_table(result).splitlines()[-1]
+    assert ended.startswith("runs ended by: ") and "1 x hop failed: no_touchdown, at x = 3" in ended
