@@ -22,7 +22,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopper_sim.sweep_files import ROWS_FILE, SweepFileError, read_rows_csv
-from hopper_sim.tradeoff import check_tradeoff, format_trends
+from hopper_sim.tradeoff import check_tradeoff, format_trends, paper_points
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,6 +37,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--backend", default="process", choices=("process", "serial", "ray"))
     parser.add_argument("--level", type=float, default=0.95, help="confidence level [0.95]")
+    parser.add_argument(
+        "--paper", action="store_true", help="also check the paper's Table I (cell means only)"
+    )
     args = parser.parse_args(argv)
 
     csv_path = Path(args.csv)
@@ -59,6 +62,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f"{len(rows)} runs from {csv_path}")
     print(format_trends(check_tradeoff(rows, level=args.level)))
+    if args.paper:
+        print("\nThe paper's Table I, same checks on its nine cell means:")
+        print(format_trends(check_tradeoff(paper_points(), level=args.level)))
     return 0
 
 

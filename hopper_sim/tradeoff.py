@@ -21,16 +21,46 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
-from hopper_sim.sweep import SweepRow
+from hopper_sim.sweep import PAPER_TABLE_I
 
 Verdict = Literal["holds", "does not hold", "inconclusive", "insufficient data"]
 
 STEPS_TREND_CS: tuple[float, ...] = (0.25, 0.50)
 """The values of C at which the paper reports fewer steps for larger eps."""
+
+
+class Point(Protocol):
+    """What the trend checks read from a run (a :class:`~hopper_sim.sweep.SweepRow`) or from a
+    cell mean (:class:`CellMean`)."""
+
+    @property
+    def c(self) -> float: ...
+    @property
+    def eps(self) -> float: ...
+    @property
+    def steps(self) -> float: ...
+    @property
+    def reward(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class CellMean:
+    """A cell's mean reward and steps, e.g. one entry of the paper's Table I."""
+
+    c: float
+    eps: float
+    reward: float
+    steps: float
+
+
+def paper_points() -> list[CellMean]:
+    """The paper's Table I as nine points (cell means only: the paper gives no per-run data,
+    so slopes fitted on these treat each mean as one observation)."""
+    return [CellMean(c, e, r, s) for (c, e), (r, s) in PAPER_TABLE_I.items()]
 
 
 class TrendDataError(ValueError):
@@ -131,7 +161,7 @@ class Trend:
     reason: str = ""
 
 
-def _trend(name: str, x: str, y: str, sign: int, rows: Sequence[SweepRow], level: float) -> Trend:
+def _trend(name: str, x: str, y: str, sign: int, rows: Sequence[Point], level: float) -> Trend:
     xs = [float(getattr(r, x)) for r in rows]
     ys = [float(getattr(r, y)) for r in rows]
     try:
@@ -146,7 +176,7 @@ def _same(a: float, b: float) -> bool:
 
 
 def check_tradeoff(
-    rows: Sequence[SweepRow],
+    rows: Sequence[Point],
     steps_cs: Sequence[float] = STEPS_TREND_CS,
     level: float = 0.95,
 ) -> list[Trend]:

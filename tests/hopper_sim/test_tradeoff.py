@@ -18,6 +18,7 @@ from hopper_sim.tradeoff import (
     check_tradeoff,
     classify,
     format_trends,
+    paper_points,
     slope_ci,
 )
 
@@ -117,12 +118,17 @@ def test_benchmark_script_reads_a_sweep_csv(tmp_path):
     path = atomic_write_text(tmp_path / "runs.csv", rows_csv(_rows(-4000.0, 150.0, 3.0, 5)))
     script = ROOT / "benchmarks" / "tradeoff.py"
     done = subprocess.run(
-        [sys.executable, str(script), str(path)], capture_output=True, text=True, check=False
+        [sys.executable, str(script), str(path), "--paper"],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
-    lines = done.stdout.splitlines()
+    ours, paper = done.stdout.split("The paper's Table I")
+    lines = ours.splitlines()
     assert lines[0] == f"90 runs from {path}"
     assert sum(ln.rstrip().endswith("holds") for ln in lines) == 6
+    assert sum(ln.rstrip().endswith("inconclusive") for ln in paper.splitlines()) == 4
     missing = subprocess.run(
         [sys.executable, str(script), str(tmp_path / "absent.csv")],
         capture_output=True,
@@ -147,3 +153,13 @@ def test_benchmark_script_runs_a_sweep_when_asked(tmp_path, monkeypatch, capsys)
     assert f"18 runs from {csv_path}" in out
     assert "steps vs eps at C = 0.25" in out and "reward vs C, all eps pooled" in out
     assert len(read_rows_csv(csv_path)) == 18
+
+
+def test_paper_table_trends():
+    points = paper_points()
+    assert len(points) == 9
+    trends = check_tradeoff(points)
+    # three equally spaced points: the OLS slope is (y3 - y1) / (x3 - x1)
+    assert trends[0].slope.slope == pytest.approx((65.1 - 98.0) / 0.005)
+    assert trends[0].slope.n == 3 and trends[-1].slope.n == 9
+    assert [t.verdict for t in trends] == ["holds", *["inconclusive"] * 4, "holds"]
