@@ -12,7 +12,9 @@ import dataclasses
 import io
 import json
 import math
+import os
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -477,3 +479,80 @@ def test_reason_is_kept_and_optional_in_files(serial, tmp_path):
     result = dataclasses.replace(serial, rows=tuple(rows))
     ended = sf.format_table(result).splitlines()[-1]
     assert ended.startswith("runs ended by: ") and "1 x hop failed: no_touchdown, at x = 3" in ended
+
+
+# --------------------------------------------------------------------------- ray's API, faked
+
+
+class FakeRef:
+    def __init__(self, value):
+        self.value = value
+
+
+class FakeRay:
+    """The part of Ray's API the ray backend calls (init, put, remote, wait, get, shutdown);
+    tasks run eagerly and ``wait`` hands them back newest first, to mimic completion out of
+    submission order. It checks the backend's control flow, not Ray itself (see the test
+    above, which runs on a real local instance when ray is installed)."""
+
+    def __init__(self, initialized: bool = False):
+        self.initialized = initialized
+        self.init_kwargs = None
+        self.shutdowns = 0
+        self.remote_options = None
+
+    def is_initialized(self):
+        return self.initialized
+
+    def init(self, **kwargs):
+        self.initialized, self.init_kwargs = True, kwargs
+
+    def shutdown(self):
+        self.initialized = False
+        self.shutdowns += 1
+
+    def put(self, value):
+        return FakeRef(value)
+
+    def remote(self, **options):
+        self.remote_options = options
+
+        def decorate(fn):
+            def call(*args):
+                return FakeRef(fn(*(a.value if isinstance(a, FakeRef) else a for a in args)))
+
+            return type("Remote", (), {"remote": staticmethod(call)})
+
+        return decorate
+
+    def wait(self, refs, num_returns=1):
+        return refs[-num_returns:], refs[:-num_returns]
+
+    def get(self, ref):
+        return ref.value
+
+
+def test_ray_backend_control_flow(serial, scenario, monkeypatch):
+    fake = FakeRay()
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    done = []
+    result = run_sweep(
+        scenario, SMALL, run=fake_run, backend="ray", workers=3, progress=lambda *a: done.append(a)
+    )
+    assert result.rows == serial.rows and result.backend == "ray"
+    assert [d for d, _, _ in done] == list(range(1, SMALL.n_runs + 1))
+    assert [row.run for *_, row in done][:2] == [2, 1]  # finished out of order, table in order
+    assert fake.init_kwargs["num_cpus"] == 3 and fake.remote_options == {"num_cpus": 1}
+    root = str(Path(sw.__file__).resolve().parents[1])
+    assert fake.init_kwargs["runtime_env"]["env_vars"]["PYTHONPATH"].split(os.pathsep)[0] == root
+    assert fake.shutdowns == 1 and not fake.initialized
+
+    cluster = FakeRay()
+    monkeypatch.setitem(sys.modules, "ray", cluster)
+    run_sweep(scenario, SMALL, run=fake_run, backend="ray", ray_address="ray://head:10001")
+    assert cluster.init_kwargs["address"] == "ray://head:10001" and cluster.shutdowns == 1
+
+    running = FakeRay(initialized=True)  # the caller's instance: used, left running
+    monkeypatch.setitem(sys.modules, "ray", running)
+    assert run_sweep(scenario, SMALL, run=fake_run, backend="ray").rows == serial.rows
+    assert running.init_kwargs is None and running.shutdowns == 0
