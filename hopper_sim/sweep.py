@@ -477,8 +477,21 @@ def _init_worker() -> None:
 def _iter_serial(
     run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask]
 ) -> Iterator[tuple[SweepTask, SweepRow]]:
+    import sys
+
     for task in tasks:
-        yield task, _run_task(run, scenario, task)
+        # One torch thread during each run, as in the workers, so that float reductions and
+        # hence the runs do not depend on the backend; the caller's setting is restored.
+        torch = sys.modules.get("torch")
+        before = torch.get_num_threads() if torch is not None else None
+        if torch is not None:
+            torch.set_num_threads(1)
+        try:
+            row = _run_task(run, scenario, task)
+        finally:
+            if torch is not None:
+                torch.set_num_threads(before)
+        yield task, row
 
 
 def _iter_process(

@@ -556,3 +556,27 @@ def test_ray_backend_control_flow(serial, scenario, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", running)
     assert run_sweep(scenario, SMALL, run=fake_run, backend="ray").rows == serial.rows
     assert running.init_kwargs is None and running.shutdowns == 0
+
+
+def torch_threads_run(scenario, seed: int, run_index: int) -> RunEnd:
+    """Reports, as its step count, how many threads torch had during the run."""
+    import torch
+
+    return RunEnd(run_index, "success", torch.get_num_threads(), 0.0, None, None, 0, 0.0)
+
+
+def test_runs_use_one_torch_thread_on_every_backend(scenario):
+    import torch
+
+    spec = SweepSpec(cs=(0.5,), epss=(0.005,), runs=1)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        serial_rows = run_sweep(scenario, spec, run=torch_threads_run).rows
+        assert torch.get_num_threads() == 2  # restored
+        process_rows = run_sweep(
+            scenario, spec, run=torch_threads_run, backend="process", workers=1
+        ).rows
+    finally:
+        torch.set_num_threads(before)
+    assert [r.steps for r in serial_rows] == [r.steps for r in process_rows] == [1]
