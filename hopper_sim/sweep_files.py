@@ -71,7 +71,7 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
 
 
 def summary_csv(cells: Iterable[CellSummary]) -> str:
-    """Per-cell summaries as CSV text (header :data:`SUMMARY_COLUMNS`; 95 % CI ends)."""
+    """Per-cell summaries as CSV text (header :data:`SUMMARY_COLUMNS`; CIs at the sweep's level)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(SUMMARY_COLUMNS)
@@ -128,7 +128,7 @@ def markdown_table(result: SweepResult) -> str:
         f"## Table I as hopnav measured it (scenario {result.scenario})",
         "",
         f"Mean reward / mean steps over {result.spec.runs} runs per cell, ± the half-width of "
-        f"the {level} % Student-t confidence interval; (successes/runs) in brackets. "
+        f"the {level} % Student-t confidence interval; (successes/runs) in parentheses. "
         f"Base seed {result.spec.seed}.",
         "",
         _markdown_table(_grid(result, _entry)),
