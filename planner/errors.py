@@ -97,7 +97,7 @@ class ScenarioValueError(ScenarioError):
     """A scenario value has the right type but an invalid value (a negative cell size...)."""
 
 
-class UnknownLabelError(ScenarioError, UnknownPropositionError):
+class UndefinedLabelError(ScenarioError, UnknownPropositionError):
     """A formula, reward or setting names a label that no region defines."""
 
 

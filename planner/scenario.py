@@ -69,8 +69,8 @@ from planner.errors import (
     ScenarioTypeError,
     ScenarioValueError,
     StartInHazardError,
+    UndefinedLabelError,
     UnknownKeyError,
-    UnknownLabelError,
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
@@ -322,7 +322,7 @@ class Scenario:
             )
         for label, reward in self.rewards.items():
             if label not in self.labels:
-                raise UnknownLabelError(
+                raise UndefinedLabelError(
                     f"reward for unknown label '{label}' (labels: {', '.join(self.labels)})",
                     key=f"rewards.{label}",
                 )
@@ -366,7 +366,7 @@ class Scenario:
         try:
             check_propositions(self.formula, self.labels)
         except UnknownPropositionError as err:
-            raise UnknownLabelError(str(err), key="formula") from err
+            raise UndefinedLabelError(str(err), key="formula") from err
         except LTLSyntaxError as err:
             raise ScenarioFormulaError(
                 f"formula {self.formula!r} does not parse: {err}", key="formula"

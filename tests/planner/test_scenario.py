@@ -15,8 +15,8 @@ from planner.errors import (
     ScenarioTypeError,
     ScenarioValueError,
     StartInHazardError,
+    UndefinedLabelError,
     UnknownKeyError,
-    UnknownLabelError,
     UnknownPropositionError,
 )
 from planner.scenario import (
@@ -191,7 +191,7 @@ def test_unknown_keys_and_reward_labels():
     err = _error(text, UnknownKeyError)
     assert err.key == "world.cel" and err.line == _line(text, "cel =")
     text = BASE + "C = 3.0\n"
-    err = _error(text, UnknownLabelError)
+    err = _error(text, UndefinedLabelError)
     assert err.key == "rewards.C" and err.line == _line(text, "C = 3.0")
 
 
@@ -233,7 +233,7 @@ def test_scenario_validates_when_built_in_code():
 
 def test_unknown_label_in_formula_names_formula_line():
     text = BASE.replace('formula = "!Haz U Goal"', 'formula = "!Haz U (Goal & C)"')
-    err = _error(text, UnknownLabelError)
+    err = _error(text, UndefinedLabelError)
     assert err.key == "formula" and err.line == 2 and "'C'" in str(err)
     assert isinstance(err, UnknownPropositionError)
 

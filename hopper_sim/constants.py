@@ -1,0 +1,41 @@
+"""Names of the MJCF elements the simulation reads or drives, and the model file paths.
+
+Every physical value lives in ``models/*.xml``; Python refers to it only through the names
+below (see ``models/README.md``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+MODELS_DIR: Path = Path(__file__).resolve().parent.parent / "models"
+HOPPER_XML: Path = MODELS_DIR / "hopper.xml"
+SCENE_XML: Path = MODELS_DIR / "scene.xml"
+
+# Bodies.
+BODY_COM = "com"
+BODY_FOOT = "foot"  # mocap body: the pinned stance foot
+# Joints of the CoM (slide joints along world x, y, z, in this order in qpos/qvel).
+JOINT_X = "com_x"
+JOINT_Y = "com_y"
+JOINT_Z = "com_z"
+COM_JOINTS: tuple[str, str, str] = (JOINT_X, JOINT_Y, JOINT_Z)
+# Sites.
+SITE_HIP = "hip"
+SITE_FOOT = "foot"
+# Tendon: the push-only spring leg.
+TENDON_LEG = "leg"
+# Actuator: stance thrust, force = ctrl * ldot along the leg.
+ACTUATOR_THRUST = "thrust"
+# Geoms.
+GEOM_COM = "com_ball"
+GEOM_FOOT = "foot_ball"
+GEOM_GROUND = "ground"
+LIGHT_SUN = "sun"
+
+# Custom numerics of the scene: perturbation defaults.
+NUMERIC_TERRAIN_AMPLITUDE = "terrain_amplitude"
+NUMERIC_TERRAIN_LENGTHSCALE = "terrain_lengthscale"
+NUMERIC_TERRAIN_FEATURES = "terrain_features"
+NUMERIC_NOISE_SIGMA = "noise_sigma"
+NUMERIC_NOISE_BOUND = "noise_bound"
