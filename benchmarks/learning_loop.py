@@ -1,0 +1,166 @@
+"""Pure-planning learning loop on the provisional case (a) layout (15 x 15), no MuJoCo.
+
+Hops are simulated from the abstraction's own landing model: landing = target centre +
+e(departure) + nu, with a smooth synthetic error field e (amplitude about 0.3 m) and the
+truncated-Gaussian noise nu. After every batch the loop calls
+:func:`planner.learning.resynthesise` (GP refit, intervals, product, synthesis) and prints the
+per-batch timings, their worst total against the 1 s budget of the issue (ratio), and the run's
+outcome. The layout is copied from the scenario branch's ``a.toml`` (provisional).
+
+    python benchmarks/learning_loop.py [--seed 0] [--runs 1] [--beta B] [--batch 50] [--cap 500]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from planner.automaton import RabinAutomaton
+from planner.gp import LandingErrorGP
+from planner.imdp.grid import GridWorld
+from planner.intervals import TruncatedGaussianNoise
+from planner.learning import ResynthesisSettings, resynthesise
+from planner.policy import SwitchingPolicy, SwitchingSettings
+
+BUDGET_S = 1.0
+
+
+def case_a() -> tuple[GridWorld, np.ndarray, int]:
+    labels = np.empty((15, 15), dtype=object)
+    w = np.zeros(15 * 15 + 1)
+
+    def rect(x0: int, y0: int, x1: int, y1: int) -> list[tuple[int, int]]:
+        return [(i, j) for i in range(x0, x1) for j in range(y0, y1)]
+
+    for ij in rect(13, 6, 15, 9):
+        labels[ij] = "Goal"
+    for ij in rect(7, 0, 9, 6) + rect(7, 9, 9, 15) + rect(11, 4, 12, 6) + rect(11, 10, 12, 12):
+        labels[ij] = "Haz"
+    for ij in [*rect(1, 12, 3, 14), (4, 13), (3, 11)]:
+        w[ij[0] * 15 + ij[1]] = 20.0
+    for ij in [*rect(1, 1, 3, 3), (4, 2), (3, 4)]:
+        w[ij[0] * 15 + ij[1]] = 5.0
+    for ij in [(4, 5), (5, 5), (4, 9), (5, 9), (6, 7), (9, 7), (11, 8)]:
+        w[ij[0] * 15 + ij[1]] = -0.5
+    return GridWorld(15, 15, 1.0, labels=labels), w, 1 * 15 + 7
+
+
+def until_automaton() -> RabinAutomaton:
+    """``!Haz U Goal``; letters: bit 0 Goal, bit 1 Haz; 0 waiting, 1 accepted, 2 rejected."""
+    table = np.array([[0, 1, 2, 1], [1, 1, 1, 1], [2, 2, 2, 2]])
+    return RabinAutomaton(("Goal", "Haz"), table, 0, [({1}, set())])
+
+
+def field(p: np.ndarray) -> np.ndarray:
+    x, y = p[:, 0], p[:, 1]
+    return np.stack([0.3 * np.sin(x / 2) + 0.1 * np.cos(y / 3), 0.25 * np.cos(x / 3 + y / 2)], 1)
+
+
+def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
+    """One simulated run from the start cell; ``gp`` is reset (its data are per run)."""
+    grid, w, start = case_a()
+    rng = np.random.default_rng(seed)
+    noise = TruncatedGaussianNoise()
+    gp.reset()
+    settings = ResynthesisSettings(beta=args.beta, candidates=args.candidates)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005))
+    pos, err = np.zeros((0, 2)), np.zeros((0, 2))
+    cell = start
+    xy = grid.centres()[cell]
+    ps, r = None, None
+    timings, phases, reward, outcome = [], {}, 0.0, "timeout"
+    t_run = time.perf_counter()
+    step = 0
+    for step in tqdm(range(args.cap), desc=f"seed {seed}", leave=False):
+        if step % args.batch == 0:
+            r = resynthesise(
+                gp, grid, until_automaton(), pos, err, reward=w, initial_cell=cell,
+                current_state=ps, settings=settings, previous=r,
+            )  # fmt: skip
+            ps = r.product.entry_state(cell) if ps is None else ps
+            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
+            timings.append(r.timings | {"detail": r.synthesis_detail})
+        d = policy.decide(ps, rng)
+        phases[d.phase] = phases.get(d.phase, 0) + 1
+        target = grid.target_centres[cell, d.action]
+        land = target + field(xy[None])[0] + noise.sample(rng, 2)
+        pos, err = np.vstack([pos, xy]), np.vstack([err, land - target])
+        xy, cell = land, int(grid.locate(land))
+        ps = r.product.step(ps, cell)
+        reward += w[cell]
+        if "Haz" in grid.labels[cell]:
+            outcome = "violation"
+        elif "Goal" in grid.labels[cell]:
+            outcome = "success"
+        if outcome != "timeout":
+            break
+    return {
+        "seed": seed,
+        "outcome": outcome,
+        "hops": step + 1,
+        "reward": reward,
+        "phases": phases,
+        "switch_step": policy.switch_step,
+        "switch_probability": policy.switch_probability,
+        "timings": timings,
+        "run_s": time.perf_counter() - t_run,
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--runs", type=int, default=1, help="seeds seed .. seed + runs - 1")
+    ap.add_argument("--beta", type=float, default=None, help="default: union bound, delta 0.01")
+    ap.add_argument("--candidates", choices=("accepting", "nonviolating"), default="accepting")
+    ap.add_argument("--batch", type=int, default=50)
+    ap.add_argument("--cap", type=int, default=500)
+    ap.add_argument("--verbose", action="store_true", help="print every batch's timings")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    gp = LandingErrorGP(seed=args.seed)
+    t0 = time.perf_counter()
+    gp.warm_up()
+    print(f"one-time GP warm-up: {time.perf_counter() - t0:.2f} s")
+    results = [run_once(args.seed + k, args, gp) for k in range(args.runs)]
+    totals = []
+    for res in results:
+        tot = [t["gp_fit"] + t["abstraction"] + t["synthesis"] for t in res["timings"]]
+        totals += tot
+        print(
+            f"seed {res['seed']}: {res['outcome']} after {res['hops']} hops, reward "
+            f"{res['reward']:.1f}, phases {res['phases']}, switch at hop {res['switch_step']} "
+            f"(worst-case probability {res['switch_probability']}), run {res['run_s']:.2f} s, "
+            f"per-batch max {max(tot):.3f} s"
+        )
+        if args.verbose:
+            for k, t in enumerate(res["timings"]):
+                main_t = ", ".join(
+                    f"{n} {t[n]:.3f} s" for n in ("gp_fit", "abstraction", "synthesis")
+                )
+                detail = ", ".join(f"{n} {v:.3f}" for n, v in t["detail"].items())
+                print(f"  batch {k}: {main_t} ({detail})")
+    outcomes = [res["outcome"] for res in results]
+    switched = [res["switch_probability"] for res in results if res["switch_probability"]]
+    print(
+        f"outcomes: {outcomes.count('success')} success, {outcomes.count('violation')} "
+        f"violation, {outcomes.count('timeout')} timeout of {len(results)}"
+    )
+    if switched:
+        print(f"worst-case probability at the switch: min {min(switched):.3f}")
+    print(f"per-batch total: median {np.median(totals):.3f} s, max {max(totals):.3f} s")
+    print(f"ratio median per-batch / budget {BUDGET_S} s: {np.median(totals) / BUDGET_S:.3f}")
+    print(f"ratio max per-batch / budget {BUDGET_S} s: {max(totals) / BUDGET_S:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

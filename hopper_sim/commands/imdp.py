@@ -1,0 +1,89 @@
+"""``hopnav imdp``: solve an interval MDP file, or convert it to another format.
+
+``hopnav imdp solve FILE [--format prism|drn|bmdp] [--target LABEL] [--avoid LABEL]
+[--optimistic] [--minimize] [--tolerance T] [--json]`` prints the value per state (the
+maximal probability of ``(!avoid) U target``; worst case unless ``--optimistic``).
+
+``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
+model in another format (``--target`` names bmdp-tool's terminal states).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from planner.errors import PlannerError
+from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
+from planner.imdp.io import FORMATS, TERMINAL, guess_format, read_model, write_model
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("imdp", help="solve or convert interval MDP files")
+    sub = p.add_subparsers(dest="imdp_command", metavar="ACTION", required=True)
+
+    s = sub.add_parser("solve", help="robust reachability values of a model file")
+    s.add_argument("file")
+    s.add_argument("--format", choices=FORMATS, help="default: from the file suffix")
+    s.add_argument("--target", action="append", help="target label (repeatable)")
+    s.add_argument("--avoid", action="append", help="label to avoid (repeatable)")
+    s.add_argument("--optimistic", action="store_true", help="best case instead of worst")
+    s.add_argument("--minimize", action="store_true", help="minimise instead of maximise")
+    s.add_argument("--tolerance", type=float, default=1e-8)
+    s.add_argument("--json", action="store_true", help="print a JSON object")
+    s.set_defaults(func=run_solve)
+
+    e = sub.add_parser("export", help="write a model file in another format")
+    e.add_argument("file")
+    e.add_argument("--out", required=True)
+    e.add_argument("--format", choices=FORMATS, help="input format (default: suffix)")
+    e.add_argument("--to", choices=FORMATS, help="output format (default: suffix)")
+    e.add_argument("--target", action="append", help="bmdp: labels of the terminal states")
+    e.set_defaults(func=run_export)
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    try:
+        model = read_model(args.file, args.format)
+        fmt = args.format or guess_format(args.file)
+        target = args.target or ([TERMINAL] if fmt == "bmdp" else None)
+        if not target:
+            print("hopnav imdp solve: --target LABEL is required", file=sys.stderr)
+            return 2
+        spec = Specification(
+            ReachAvoid(target, args.avoid),
+            "optimistic" if args.optimistic else "pessimistic",
+            "minimize" if args.minimize else "maximize",
+        )
+        sol = solve(Problem(model, spec), ValueIteration(tolerance=args.tolerance))
+    except PlannerError as err:
+        print(f"hopnav imdp solve: {err}", file=sys.stderr)
+        return 1
+    if args.json:
+        out = {
+            "values": sol.values.tolist(),
+            "residual": sol.residual,
+            "iterations": sol.iterations,
+        }
+        print(json.dumps(out))
+    else:
+        for s, v in enumerate(sol.values):
+            print(f"{s} {v:.12g}")
+        print(f"# residual {sol.residual:.3g}, iterations {sol.iterations}", file=sys.stderr)
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    try:
+        model = read_model(args.file, args.format)
+        terminal = None
+        if args.target:
+            terminal = model.states_labelled(args.target[0])
+            for name in args.target[1:]:
+                terminal |= model.states_labelled(name)
+        write_model(model, args.out, args.to, terminal=terminal)
+    except PlannerError as err:
+        print(f"hopnav imdp export: {err}", file=sys.stderr)
+        return 1
+    return 0

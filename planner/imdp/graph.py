@@ -1,0 +1,453 @@
+"""Graph-exact analyses of interval MDPs: reachability sets, end components, sub-models.
+
+Qualitative questions are decided on the boolean structure of the bounds, never by
+comparing computed probabilities with 0 or 1:
+
+* ``upper > 0``: the adversary *may* use the edge (it is in every analysis where the run
+  might take it);
+* ``lower > 0``: the adversary *must* use the edge;
+* the interval constraint of a row: every adversary puts mass at least
+  ``max(sum_{j in X} l_j, 1 - sum_{j not in X} u_j)`` into a successor set ``X``; the second
+  term counts as positive when it exceeds the model's bound tolerance (1e-9 by default).
+
+Row masks ``rows`` (shape ``(n_rows,)``) restrict the actions a controller may use (a
+sub-model); state masks have shape ``(n_states,)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+from planner.errors import SpecificationError
+from planner.imdp.model import IMDP, first_of_runs
+
+
+@dataclass(frozen=True)
+class EndComponent:
+    """An end component ``(T, Act)``: its states and the rows (state, action) it keeps.
+
+    Attributes:
+        states: sorted state indices of ``T``.
+        rows: sorted row indices of ``Act`` (every row of ``model.row_state[rows]`` is in T).
+        pair: the Rabin pair an accepting component satisfies (-1: not applicable).
+    """
+
+    states: np.ndarray
+    rows: np.ndarray
+    pair: int = -1
+    """For accepting components: the index of the Rabin pair they satisfy."""
+
+    def state_mask(self, n_states: int) -> np.ndarray:
+        mask = np.zeros(n_states, dtype=bool)
+        mask[self.states] = True
+        return mask
+
+    def row_mask(self, n_rows: int) -> np.ndarray:
+        mask = np.zeros(n_rows, dtype=bool)
+        mask[self.rows] = True
+        return mask
+
+    def __len__(self) -> int:
+        return int(self.states.size)
+
+
+def _all_rows(model: IMDP, rows: np.ndarray | None) -> np.ndarray:
+    if rows is None:
+        return np.ones(model.n_rows, dtype=bool)
+    rows = np.asarray(rows, dtype=bool)
+    if rows.shape != (model.n_rows,):
+        raise SpecificationError(f"row mask must have shape ({model.n_rows},), got {rows.shape}")
+    return rows
+
+
+def rows_from_actions(model: IMDP, allowed: np.ndarray) -> np.ndarray:
+    """Row mask of an ``(n_states, n_actions)`` mask of allowed actions."""
+    allowed = np.asarray(allowed, dtype=bool)
+    if allowed.shape != (model.n_states, model.n_actions):
+        raise SpecificationError(
+            f"action mask must have shape ({model.n_states}, {model.n_actions}), "
+            f"got {allowed.shape}"
+        )
+    return allowed[model.row_state, model.row_action]
+
+
+def actions_from_rows(model: IMDP, rows: np.ndarray) -> np.ndarray:
+    """``(n_states, n_actions)`` mask of the actions whose rows are set in ``rows``."""
+    out = np.zeros((model.n_states, model.n_actions), dtype=bool)
+    rows = np.asarray(rows, dtype=bool)
+    out[model.row_state[rows], model.row_action[rows]] = True
+    return out
+
+
+def has_row(model: IMDP, rows: np.ndarray) -> np.ndarray:
+    """States with at least one row set in ``rows``."""
+    return np.bincount(model.row_state[rows], minlength=model.n_states) > 0
+
+
+def _row_any(model: IMDP, entry_flags: np.ndarray) -> np.ndarray:
+    return np.bincount(model.entry_row[entry_flags], minlength=model.n_rows) > 0
+
+
+def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
+    """Rows whose every possible successor (``upper > 0``) lies in ``mask``."""
+    leaves = (model.upper > 0) & ~mask[model.successor]
+    return ~_row_any(model, leaves)
+
+
+def may_enter(model: IMDP, mask: np.ndarray) -> np.ndarray:
+    """Rows that may (``upper > 0``) move into ``mask``."""
+    return _row_any(model, (model.upper > 0) & mask[model.successor])
+
+
+def forced_into(model: IMDP, mask: np.ndarray) -> np.ndarray:
+    """Rows that put positive mass into ``mask`` under *every* adversary.
+
+    True iff some ``lower > 0`` edge enters ``mask``, or the upper bounds of the edges
+    outside ``mask`` sum to less than ``1 - tol``.
+    """
+    inside = mask[model.successor]
+    must = _row_any(model, (model.lower > 0) & inside)
+    outside_up = np.bincount(
+        model.entry_row, weights=np.where(inside, 0.0, model.upper), minlength=model.n_rows
+    )
+    touches = _row_any(model, inside & (model.upper > 0))
+    return must | (touches & (outside_up < 1.0 - model.tolerance))
+
+
+def may_stay_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
+    """Rows for which *some* adversary keeps all mass in ``mask``.
+
+    No ``lower > 0`` edge leaves ``mask`` and the upper bounds inside sum to at least
+    ``1 - tol``.
+    """
+    inside = mask[model.successor]
+    must_leave = _row_any(model, (model.lower > 0) & ~inside)
+    inside_up = np.bincount(
+        model.entry_row, weights=np.where(inside, model.upper, 0.0), minlength=model.n_rows
+    )
+    return ~must_leave & (inside_up >= 1.0 - model.tolerance)
+
+
+def state_graph(model: IMDP, rows: np.ndarray | None = None) -> sp.csr_matrix:
+    """Adjacency ``(n_states, n_states)`` of the edges ``upper > 0`` of the rows in ``rows``."""
+    rows = _all_rows(model, rows)
+    keep = rows[model.entry_row] & (model.upper > 0)
+    src = model.row_state[model.entry_row[keep]]
+    dst = model.successor[keep]
+    g = sp.csr_matrix((np.ones(src.size, dtype=np.int8), (src, dst)), shape=(model.n_states,) * 2)
+    return g
+
+
+def possible_reach(
+    model: IMDP,
+    target: np.ndarray,
+    avoid: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
+) -> np.ndarray:
+    """States with best-case probability > 0 of reaching ``target`` without ``avoid``.
+
+    Backward breadth-first search over ``upper > 0`` edges (one pass, ``O(entries)``).
+    """
+    rows = _all_rows(model, rows)
+    target = np.asarray(target, dtype=bool)
+    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
+    src_ok = ~avoid & ~target
+    rows = rows & src_ok[model.row_state]
+    g = state_graph(model, rows).T.tocsr()
+    n = model.n_states
+    # super node n points at every target; BFS over reversed edges from it
+    t_idx = np.flatnonzero(target)
+    ext = sp.bmat(
+        [
+            [g, sp.csr_matrix((n, 1), dtype=np.int8)],
+            [
+                sp.csr_matrix(
+                    (np.ones(t_idx.size, np.int8), (np.zeros_like(t_idx), t_idx)), shape=(1, n)
+                ),
+                None,
+            ],
+        ],
+        format="csr",
+    )
+    order = breadth_first_order(ext, n, directed=True, return_predecessors=False)
+    out = np.zeros(n + 1, dtype=bool)
+    out[order] = True
+    return out[:n]
+
+
+def robust_positive_reach(
+    model: IMDP,
+    target: np.ndarray,
+    avoid: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """States whose worst-case probability of ``(!avoid) U target`` is positive.
+
+    Returns ``(mask, row)``: ``row[s]`` is a row of ``s`` that forces positive mass one
+    layer closer to ``target`` (-1 for targets and states outside the set).
+    """
+    rows = _all_rows(model, rows)
+    target = np.asarray(target, dtype=bool)
+    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
+    cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
+    return _attractor(model, target.copy(), cand)
+
+
+def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
+    """Indices of the entries whose successor is one of ``states``."""
+    ptr, entries = model.incoming()
+    starts, ends = ptr[states], ptr[states + 1]
+    lens = ends - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
+    return entries[np.arange(total) + offs]
+
+
+def _attractor(
+    model: IMDP, start: np.ndarray, cand_rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Layered robust attractor: add states with a candidate row forced into the set.
+
+    Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
+    entry into the states added by the previous layer, so the whole attractor costs
+    ``O(entries)`` plus ``O(rows)`` per layer.
+    """
+    m = model
+    x = start.copy()
+    choice = np.full(m.n_states, -1, dtype=np.int64)
+    inside = x[m.successor]
+    must = _row_any(m, (m.lower > 0) & inside)
+    touches = _row_any(m, inside & (m.upper > 0))
+    outside_up = np.bincount(
+        m.entry_row, weights=np.where(inside, 0.0, m.upper), minlength=m.n_rows
+    )
+    limit = 1.0 - m.tolerance
+    check = np.flatnonzero(cand_rows & (must | touches))
+    while check.size:
+        ok = check[
+            ~x[m.row_state[check]] & (must[check] | (touches[check] & (outside_up[check] < limit)))
+        ]
+        if ok.size == 0:
+            break
+        states = m.row_state[ok]
+        first = first_of_runs(states)  # rows (hence states) are in increasing order
+        new = states[first]
+        choice[new] = ok[first]
+        x[new] = True
+        e = _gather_incoming(m, new)
+        er = m.entry_row[e]
+        must[er[m.lower[e] > 0]] = True
+        touches[er[m.upper[e] > 0]] = True
+        mark = np.zeros(m.n_rows, dtype=bool)
+        mark[er] = True
+        rows = np.flatnonzero(mark)
+        outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
+        check = rows[cand_rows[rows]]
+    return x, choice
+
+
+def robust_almost_sure_reach(
+    model: IMDP,
+    target: np.ndarray,
+    avoid: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
+    region: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """States whose worst-case probability of ``(!avoid) U target`` is 1 (within ``region``).
+
+    The interval version of the classic probability-1 algorithm: shrink a candidate set
+    ``U`` (initially ``region`` minus ``avoid``) to the robust attractor of ``target``
+    computed with the rows that cannot leave ``U`` (every ``upper > 0`` edge inside),
+    until it no longer shrinks. Under the returned strategy every row stays in ``U`` and
+    moves one attractor layer closer with a probability bounded away from 0 under every
+    adversary, so the target is reached almost surely.
+
+    Returns ``(mask, row)``: the set and a strategy (row index per state, -1 on targets
+    and outside the set).
+    """
+    rows = _all_rows(model, rows)
+    target = np.asarray(target, dtype=bool)
+    n = model.n_states
+    u = np.ones(n, dtype=bool) if region is None else np.asarray(region, dtype=bool).copy()
+    if avoid is not None:
+        u &= ~np.asarray(avoid, dtype=bool) | target
+    while True:
+        cand = rows & u[model.row_state] & ~target[model.row_state] & stays_in(model, u)
+        x, choice = _attractor(model, target & u, cand)
+        x &= u
+        if np.array_equal(x, u):
+            choice[~u] = -1
+            return u, choice
+        u = x
+
+
+def maximal_end_components(
+    model: IMDP,
+    rows: np.ndarray | None = None,
+    states: np.ndarray | None = None,
+    mode: str = "pessimistic",
+) -> list[EndComponent]:
+    """Maximal end components, by iterated strongly-connected-component decomposition.
+
+    ``mode="pessimistic"``: a row belongs to an end component only if *every* possible
+    successor (``upper > 0``) lies in the component, whatever the adversary does.
+    ``mode="optimistic"``: the adversary cooperates; a row belongs if some adversary keeps
+    it inside (:func:`may_stay_in`), and the component is strongly connected through
+    ``upper > 0`` edges (a cooperative adversary can realise every such edge).
+
+    Note that a pessimistic end component is closed but need not be *visited fully* under
+    every adversary (it can cut edges with ``lower == 0``); use
+    :func:`accepting_end_components` for the robust acceptance question.
+    """
+    if mode not in ("pessimistic", "optimistic"):
+        raise SpecificationError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
+    r = _all_rows(model, rows).copy()
+    s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
+    s = s.copy()
+    r &= s[model.row_state]
+    succ = model.successor
+    while True:
+        keep = r & (stays_in(model, s) if mode == "pessimistic" else may_stay_in(model, s))
+        s_new = s & has_row(model, keep)
+        r = keep & s_new[model.row_state]
+        g = state_graph(model, r)
+        g = g.multiply(s_new[None, :]).tocsr() if mode == "optimistic" else g
+        _, comp = connected_components(g, directed=True, connection="strong")
+        comp = np.where(s_new, comp, -1)
+        same = comp[succ] == comp[model.row_state[model.entry_row]]
+        if mode == "pessimistic":
+            ok = ~_row_any(model, (model.upper > 0) & ~same)
+        else:
+            must_leave = _row_any(model, (model.lower > 0) & ~same)
+            in_up = np.bincount(
+                model.entry_row, weights=np.where(same, model.upper, 0.0), minlength=model.n_rows
+            )
+            ok = ~must_leave & (in_up >= 1.0 - model.tolerance)
+        r_new = r & ok
+        s_new2 = s_new & has_row(model, r_new)
+        r_new &= s_new2[model.row_state]
+        if np.array_equal(r_new, r) and np.array_equal(s_new2, s):
+            break
+        r, s = r_new, s_new2
+    if not s.any():
+        return []
+    labels = comp[s]
+    idx = np.flatnonzero(s)
+    order = np.argsort(labels, kind="stable")
+    uniq, starts = np.unique(labels[order], return_index=True)
+    groups = np.split(idx[order], starts[1:])
+    row_idx = np.flatnonzero(r)
+    row_comp = comp[model.row_state[row_idx]]
+    ro = np.argsort(row_comp, kind="stable")
+    ru, rstarts = np.unique(row_comp[ro], return_index=True)
+    row_groups = dict(zip(ru.tolist(), np.split(row_idx[ro], rstarts[1:]), strict=True))
+    return [
+        EndComponent(np.sort(g_states), np.sort(row_groups[int(c)]))
+        for c, g_states in zip(uniq.tolist(), groups, strict=True)
+    ]
+
+
+def robust_buchi_region(
+    model: IMDP,
+    good: np.ndarray,
+    states: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Largest ``T`` inside ``states`` from which ``good`` is visited infinitely often with
+    probability 1 under every adversary, never leaving ``T``.
+
+    Returns ``(mask, rows)``: ``T`` and the rows that stay in ``T``.
+    """
+    rows = _all_rows(model, rows)
+    good = np.asarray(good, dtype=bool)
+    t = np.asarray(states, dtype=bool).copy()
+    while True:
+        r = rows & t[model.row_state] & stays_in(model, t)
+        w, _ = robust_almost_sure_reach(model, good & t & has_row(model, r), rows=r, region=t)
+        if np.array_equal(w, t):
+            return t, r
+        t = w
+
+
+def accepting_end_components(
+    model: IMDP,
+    good: np.ndarray,
+    bad: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> list[EndComponent]:
+    """Robustly accepting maximal end components of a Rabin pair ``(good, bad)``.
+
+    An end component qualifies if it avoids ``bad`` and, using only its rows, visits
+    ``good`` infinitely often with probability 1 under *every* adversary. (An SCC held
+    together by edges with ``lower == 0`` does not qualify when the adversary can cut the
+    way to ``good``.) Computed by alternating :func:`robust_buchi_region` with the MEC
+    decomposition until each component is its own Büchi region.
+    """
+    rows = _all_rows(model, rows)
+    good = np.asarray(good, dtype=bool)
+    start = ~np.asarray(bad, dtype=bool)
+    out: list[EndComponent] = []
+    work = [start]
+    while work:
+        region = work.pop()
+        t, r = robust_buchi_region(model, good, region, rows)
+        for ec in maximal_end_components(model, rows=r, states=t, mode="pessimistic"):
+            mask = ec.state_mask(model.n_states)
+            ec_rows = np.zeros(model.n_rows, dtype=bool)
+            ec_rows[ec.rows] = True
+            t2, _ = robust_buchi_region(model, good, mask, ec_rows)
+            if np.array_equal(t2, mask):
+                out.append(ec)
+            elif t2.any():
+                work.append(t2)
+    out.sort(key=lambda ec: int(ec.states[0]))
+    return out
+
+
+def optimistic_accepting_end_components(
+    model: IMDP,
+    good: np.ndarray,
+    bad: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> list[EndComponent]:
+    """End components (cooperative adversary) that avoid ``bad`` and contain a ``good`` state."""
+    ecs = maximal_end_components(
+        model, rows=rows, states=~np.asarray(bad, dtype=bool), mode="optimistic"
+    )
+    good = np.asarray(good, dtype=bool)
+    return [ec for ec in ecs if good[ec.states].any()]
+
+
+@dataclass(frozen=True)
+class SubModel:
+    """A sub-model: the states kept and the rows (actions) allowed there.
+
+    Attributes:
+        states: ``(n_states,)`` mask of the states that keep at least one allowed action.
+        rows: ``(n_rows,)`` mask of the allowed rows.
+        actions: ``(n_states, n_actions)`` mask of the allowed actions.
+    """
+
+    states: np.ndarray
+    rows: np.ndarray
+    actions: np.ndarray
+
+
+def prune(model: IMDP, removed: np.ndarray, rows: np.ndarray | None = None) -> SubModel:
+    """Remove the rows that may enter ``removed``, then the states left without rows, and
+    repeat until nothing changes (Jiang et al. 2023, Algorithm 1)."""
+    r = _all_rows(model, rows).copy()
+    bad = np.asarray(removed, dtype=bool).copy()
+    while True:
+        r &= ~bad[model.row_state] & ~may_enter(model, bad)
+        new_bad = bad | ~has_row(model, r)
+        if np.array_equal(new_bad, bad):
+            break
+        bad = new_bad
+    return SubModel(~bad, r, actions_from_rows(model, r))

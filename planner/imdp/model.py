@@ -1,0 +1,318 @@
+"""Interval Markov decision processes (IMDPs) stored as sparse rows.
+
+An IMDP is ``I = (Q, A, T_lo, T_up, Q0, AP, L)``: for every enabled (state, action) pair, a
+*row*, each successor ``q'`` has an interval ``[T_lo(q, a, q'), T_up(q, a, q')]`` that
+contains the unknown transition probability. An adversary picks, each time a row is used,
+a distribution ``p`` with ``T_lo <= p <= T_up`` and ``sum p = 1``.
+
+Storage (CSR-like, rows sorted by state then action, entries by successor):
+
+* ``row_state[r]``, ``row_action[r]``: the (state, action) of row ``r``;
+  ``state_ptr[s] : state_ptr[s + 1]`` are the rows of state ``s``;
+* ``row_ptr[r] : row_ptr[r + 1]`` are the entries of row ``r`` in ``successor``,
+  ``lower``, ``upper`` (and ``entry_row`` gives each entry's row).
+
+Bounds are stored as given. Graph analyses use the exact boolean structure
+``lower > 0`` / ``upper > 0``; an entry with ``upper == 0`` is allowed and means "never".
+A row must bracket 1: ``sum(lower) <= 1 + tol`` and ``sum(upper) >= 1 - tol`` with
+``tol = BOUND_TOLERANCE`` (1e-9) unless the caller states another tolerance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from planner.errors import (
+    DuplicateSuccessorError,
+    IndexOutOfRangeError,
+    IntervalBoundsError,
+    MissingRowError,
+    ModelError,
+    RowSumError,
+    UnknownLabelError,
+)
+
+
+def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """Indices of the first element of every run of equal values in a sorted array."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+
+
+BOUND_TOLERANCE = 1e-9
+"""Slack allowed when checking that a row brackets 1 (``sum l <= 1 <= sum u``)."""
+
+
+def _int_array(x: object, name: str) -> np.ndarray:
+    a = np.asarray(x)
+    if a.ndim != 1:
+        raise ModelError(f"{name} must be a 1-D array, got shape {a.shape}")
+    if a.size and not np.issubdtype(a.dtype, np.integer):
+        raise ModelError(f"{name} must hold integers, got dtype {a.dtype}")
+    return a.astype(np.int64, copy=False)
+
+
+def _float_array(x: object, name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 1:
+        raise ModelError(f"{name} must be a 1-D array, got shape {a.shape}")
+    return a
+
+
+class IMDP:
+    """An interval MDP built from COO arrays of equal length.
+
+    Args:
+        n_states: number of states ``|Q|``.
+        state, action, successor: integer arrays, one entry per transition interval.
+        lower, upper: the interval bounds ``T_lo``, ``T_up`` (floats in ``[0, 1]``).
+        n_actions: size of the action alphabet (default: ``max(action) + 1``).
+        labels: per-state iterables of proposition names (default: no labels).
+        propositions: the declared proposition names; every label must be one of them
+            (default: the union of the labels, in sorted order).
+        initial: the initial states ``Q0`` (default: ``(0,)``).
+        action_names: names of the actions (default: ``"a0", "a1", ...``).
+        tolerance: the slack of the row-sum check.
+
+    Raises:
+        IndexOutOfRangeError: a state, action or successor index outside the model.
+        IntervalBoundsError: a bound outside ``[0, 1]``, not finite, or ``lower > upper``.
+        DuplicateSuccessorError: one row names a successor twice.
+        RowSumError: a row with ``sum(lower) > 1 + tol`` or ``sum(upper) < 1 - tol``.
+        MissingRowError: a state without any enabled action.
+        UnknownLabelError: a label that is not a declared proposition.
+        ModelError: arrays of unequal length or wrong type.
+    """
+
+    def __init__(
+        self,
+        n_states: int,
+        state: Sequence[int] | np.ndarray,
+        action: Sequence[int] | np.ndarray,
+        successor: Sequence[int] | np.ndarray,
+        lower: Sequence[float] | np.ndarray,
+        upper: Sequence[float] | np.ndarray,
+        *,
+        n_actions: int | None = None,
+        labels: Sequence[Iterable[str]] | None = None,
+        propositions: Sequence[str] | None = None,
+        initial: Iterable[int] = (0,),
+        action_names: Sequence[str] | None = None,
+        tolerance: float = BOUND_TOLERANCE,
+    ) -> None:
+        n = int(n_states)
+        if n <= 0:
+            raise ModelError(f"an IMDP needs at least one state, got n_states={n_states}")
+        s = _int_array(state, "state")
+        a = _int_array(action, "action")
+        t = _int_array(successor, "successor")
+        lo = _float_array(lower, "lower")
+        up = _float_array(upper, "upper")
+        sizes = {len(s), len(a), len(t), len(lo), len(up)}
+        if len(sizes) != 1:
+            raise ModelError(
+                f"state, action, successor, lower, upper must have equal length, got "
+                f"{len(s)}, {len(a)}, {len(t)}, {len(lo)}, {len(up)}"
+            )
+        n_act = int(n_actions) if n_actions is not None else (int(a.max()) + 1 if a.size else 1)
+        for arr, name, hi in ((s, "state", n), (t, "successor", n), (a, "action", n_act)):
+            bad = np.flatnonzero((arr < 0) | (arr >= hi))
+            if bad.size:
+                i = bad[0]
+                raise IndexOutOfRangeError(
+                    f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): {name} "
+                    f"{arr[i]} is not in [0, {hi})"
+                )
+        bad = np.flatnonzero(~np.isfinite(lo) | ~np.isfinite(up) | (lo < 0) | (up > 1))
+        if bad.size:
+            i = bad[0]
+            raise IntervalBoundsError(
+                f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): bounds "
+                f"[{lo[i]}, {up[i]}] are not inside [0, 1]"
+            )
+        bad = np.flatnonzero(lo > up)
+        if bad.size:
+            i = bad[0]
+            raise IntervalBoundsError(
+                f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): lower bound "
+                f"{lo[i]} exceeds upper bound {up[i]}"
+            )
+        order = np.lexsort((t, a, s))
+        s, a, t, lo, up = s[order], a[order], t[order], lo[order], up[order]
+        same = (s[1:] == s[:-1]) & (a[1:] == a[:-1])
+        dup = np.flatnonzero(same & (t[1:] == t[:-1]))
+        if dup.size:
+            i = dup[0]
+            raise DuplicateSuccessorError(
+                f"state {s[i]}, action {a[i]} lists successor {t[i]} more than once"
+            )
+        starts = np.flatnonzero(np.concatenate(([True], ~same))) if s.size else np.zeros(0, int)
+        row_ptr = np.append(starts, s.size).astype(np.int64)
+        row_state = s[starts]
+        row_action = a[starts]
+        sum_lo = np.add.reduceat(lo, starts) if s.size else np.zeros(0)
+        sum_up = np.add.reduceat(up, starts) if s.size else np.zeros(0)
+        bad = np.flatnonzero((sum_lo > 1 + tolerance) | (sum_up < 1 - tolerance))
+        if bad.size:
+            r = bad[0]
+            raise RowSumError(
+                f"state {row_state[r]}, action {row_action[r]}: bounds do not bracket 1 "
+                f"(sum of lower bounds {sum_lo[r]:.12g}, sum of upper bounds "
+                f"{sum_up[r]:.12g}, tolerance {tolerance:g})"
+            )
+        rows_per_state = np.bincount(row_state, minlength=n)
+        empty = np.flatnonzero(rows_per_state == 0)
+        if empty.size:
+            raise MissingRowError(
+                f"state {empty[0]} has no enabled action ({empty.size} such states); "
+                "give absorbing states a self-loop action"
+            )
+
+        self.n_states: int = n
+        self.n_actions: int = n_act
+        self.tolerance: float = float(tolerance)
+        self.row_state: np.ndarray = row_state
+        self.row_action: np.ndarray = row_action
+        self.row_ptr: np.ndarray = row_ptr
+        self.state_ptr: np.ndarray = np.concatenate(([0], np.cumsum(rows_per_state))).astype(
+            np.int64
+        )
+        self.successor: np.ndarray = t
+        self.lower: np.ndarray = lo
+        self.upper: np.ndarray = up
+        self.entry_row: np.ndarray = np.repeat(
+            np.arange(len(row_state), dtype=np.int64), np.diff(row_ptr)
+        )
+        self.row_lower_sum: np.ndarray = sum_lo
+        self.row_upper_sum: np.ndarray = sum_up
+        self.enabled: np.ndarray = np.zeros((n, n_act), dtype=bool)
+        self.enabled[row_state, row_action] = True
+        self.row_index: np.ndarray = np.full((n, n_act), -1, dtype=np.int64)
+        self.row_index[row_state, row_action] = np.arange(len(row_state))
+
+        self._incoming: tuple[np.ndarray, np.ndarray] | None = None
+        self._set_labels(labels, propositions)
+        init = np.unique(_int_array(list(initial), "initial"))
+        bad = np.flatnonzero((init < 0) | (init >= n))
+        if bad.size or init.size == 0:
+            raise IndexOutOfRangeError(f"initial states {init.tolist()} must be in [0, {n})")
+        self.initial: np.ndarray = init
+        if action_names is None:
+            action_names = tuple(f"a{i}" for i in range(n_act))
+        if len(action_names) != n_act:
+            raise ModelError(f"{len(action_names)} action names for {n_act} actions")
+        self.action_names: tuple[str, ...] = tuple(str(x) for x in action_names)
+        for arr in (
+            self.row_state,
+            self.row_action,
+            self.row_ptr,
+            self.state_ptr,
+            self.successor,
+            self.lower,
+            self.upper,
+            self.entry_row,
+            self.enabled,
+            self.row_index,
+        ):
+            arr.setflags(write=False)
+
+    def _set_labels(
+        self, labels: Sequence[Iterable[str]] | None, propositions: Sequence[str] | None
+    ) -> None:
+        if labels is None:
+            label_sets = [frozenset()] * self.n_states
+        else:
+            label_sets = [frozenset(str(x) for x in ls) for ls in labels]
+            if len(label_sets) != self.n_states:
+                raise ModelError(f"{len(label_sets)} label sets for {self.n_states} states")
+        if propositions is None:
+            props = tuple(sorted(set().union(*label_sets)))
+        else:
+            props = tuple(str(p) for p in propositions)
+            known = set(props)
+            for i, ls in enumerate(label_sets):
+                unknown = ls - known
+                if unknown:
+                    raise UnknownLabelError(
+                        f"state {i} carries label(s) {sorted(unknown)} that are not among "
+                        f"the declared propositions {props}"
+                    )
+        self.propositions: tuple[str, ...] = props
+        self.labels: tuple[frozenset[str], ...] = tuple(label_sets)
+        index = {p: i for i, p in enumerate(props)}
+        mask = np.zeros((self.n_states, len(props)), dtype=bool)
+        for i, ls in enumerate(label_sets):
+            for p in ls:
+                mask[i, index[p]] = True
+        mask.setflags(write=False)
+        self.label_matrix: np.ndarray = mask
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def n_rows(self) -> int:
+        return int(self.row_state.shape[0])
+
+    @property
+    def n_entries(self) -> int:
+        return int(self.successor.shape[0])
+
+    def incoming(self) -> tuple[np.ndarray, np.ndarray]:
+        """Reverse index ``(ptr, entries)``: ``entries[ptr[s]:ptr[s+1]]`` are the entries
+        whose successor is ``s`` (computed once, then cached)."""
+        if self._incoming is None:
+            entries = np.argsort(self.successor, kind="stable")
+            counts = np.bincount(self.successor, minlength=self.n_states)
+            ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+            entries.setflags(write=False)
+            ptr.setflags(write=False)
+            self._incoming = (ptr, entries)
+        return self._incoming
+
+    def states_labelled(self, name: str) -> np.ndarray:
+        """Boolean mask ``(n_states,)`` of the states that carry label ``name``.
+
+        Raises:
+            UnknownLabelError: if ``name`` is not a declared proposition.
+        """
+        if name not in self.propositions:
+            raise UnknownLabelError(
+                f"label {name!r} is not among the model's propositions {self.propositions}"
+            )
+        return self.label_matrix[:, self.propositions.index(name)].copy()
+
+    def coo(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The transitions as COO arrays ``(state, action, successor, lower, upper)``."""
+        return (
+            self.row_state[self.entry_row],
+            self.row_action[self.entry_row],
+            self.successor.copy(),
+            self.lower.copy(),
+            self.upper.copy(),
+        )
+
+    def with_initial(self, initial: Iterable[int]) -> IMDP:
+        """A copy of this model with other initial states."""
+        s, a, t, lo, up = self.coo()
+        return IMDP(
+            self.n_states,
+            s,
+            a,
+            t,
+            lo,
+            up,
+            n_actions=self.n_actions,
+            labels=self.labels,
+            propositions=self.propositions,
+            initial=initial,
+            action_names=self.action_names,
+            tolerance=self.tolerance,
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"IMDP(states={self.n_states}, actions={self.n_actions}, rows={self.n_rows}, "
+            f"entries={self.n_entries}, propositions={self.propositions})"
+        )

@@ -1,0 +1,384 @@
+"""Specifications, problems and robust value iteration (IntervalMDP.jl's nouns).
+
+``solve(Problem(model, Specification(prop, satisfaction, strategy)), ValueIteration())``
+returns a :class:`Solution` with the values per state, a memoryless strategy (one action
+per state), the row values ``Q``, the residual and the iteration count.
+
+Properties:
+
+* :class:`ReachAvoid`: probability of ``(!avoid) U target``. Value iteration starts from 0
+  (the least fixed point, right also with end components and zero lower bounds); states
+  whose value is 0 or 1 are found by graph analysis first and held fixed.
+* :class:`DiscountedReward`: ``V(s) = opt_a min/max_p sum_{s'} p(s') (W(s') + gamma V(s'))``:
+  the reward ``W`` is collected on *landing* in a state (DESIGN.md).
+
+``satisfaction="pessimistic"``: the adversary opposes the strategy (the worst case);
+``"optimistic"``: it helps. The stopping rule is ``max_s |V_k(s) - V_{k-1}(s)| < tolerance``
+(default 1e-8); the last such difference is the reported residual. For discounted reward
+the error is at most ``gamma / (1 - gamma) * residual``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.errors import SpecificationError
+from planner.imdp import graph
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.ordering import OrderingAdversary
+
+StateSet = np.ndarray | str | Sequence[str] | Sequence[int]
+
+
+@dataclass(frozen=True)
+class ReachAvoid:
+    """Reach ``target`` without first entering ``avoid``: ``(!avoid) U target``.
+
+    ``target`` / ``avoid``: a boolean state mask, a label name, a list of label names
+    (a state qualifies if it carries any of them) or a list of state indices.
+    """
+
+    target: StateSet
+    avoid: StateSet | None = None
+
+
+@dataclass(frozen=True)
+class DiscountedReward:
+    """Discounted reward ``sum_k gamma^k W(s_{k+1})`` (``W`` collected on landing)."""
+
+    reward: np.ndarray
+    discount: float = 0.95
+
+
+@dataclass(frozen=True)
+class Specification:
+    """A property with the adversary's and the strategy's goal.
+
+    Args:
+        property: :class:`ReachAvoid` or :class:`DiscountedReward`.
+        satisfaction: ``"pessimistic"`` (adversary opposes) or ``"optimistic"``.
+        strategy: ``"maximize"`` or ``"minimize"``.
+    """
+
+    property: ReachAvoid | DiscountedReward
+    satisfaction: str = "pessimistic"
+    strategy: str = "maximize"
+
+    def __post_init__(self) -> None:
+        if self.satisfaction not in ("pessimistic", "optimistic"):
+            raise SpecificationError(
+                f"satisfaction must be 'pessimistic' or 'optimistic', got {self.satisfaction!r}"
+            )
+        if self.strategy not in ("maximize", "minimize"):
+            raise SpecificationError(
+                f"strategy must be 'maximize' or 'minimize', got {self.strategy!r}"
+            )
+        if not isinstance(self.property, ReachAvoid | DiscountedReward):
+            raise SpecificationError(
+                f"property must be ReachAvoid or DiscountedReward, got {type(self.property)}"
+            )
+        if isinstance(self.property, DiscountedReward) and not 0 <= self.property.discount < 1:
+            raise SpecificationError(f"discount must be in [0, 1), got {self.property.discount}")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A model, a specification and (optionally) the actions the strategy may use.
+
+    Args:
+        model: the interval MDP.
+        specification: what to compute.
+        allowed: ``(n_states, n_actions)`` mask of allowed actions (a sub-model); states
+            without an allowed action get value 0 and strategy -1.
+
+    Raises:
+        SpecificationError: on masks of the wrong shape, unknown labels or state indices.
+    """
+
+    model: IMDP
+    specification: Specification
+    allowed: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        m = self.model
+        if self.allowed is not None:
+            a = np.asarray(self.allowed)
+            if a.shape != (m.n_states, m.n_actions) or a.dtype != bool:
+                raise SpecificationError(
+                    f"allowed must be a boolean ({m.n_states}, {m.n_actions}) mask, got "
+                    f"{a.dtype} {a.shape}"
+                )
+        prop = self.specification.property
+        if isinstance(prop, ReachAvoid):
+            resolve_states(m, prop.target, "target")
+            if prop.avoid is not None:
+                resolve_states(m, prop.avoid, "avoid")
+        else:
+            w = np.asarray(prop.reward, dtype=np.float64)
+            if w.shape != (m.n_states,) or not np.all(np.isfinite(w)):
+                raise SpecificationError(
+                    f"reward must be a finite array of shape ({m.n_states},), got {w.shape}"
+                )
+
+    def row_mask(self) -> np.ndarray:
+        if self.allowed is None:
+            return np.ones(self.model.n_rows, dtype=bool)
+        return graph.rows_from_actions(self.model, self.allowed)
+
+
+def resolve_states(model: IMDP, states: StateSet, what: str) -> np.ndarray:
+    """A boolean state mask from a mask, a label, label names or state indices."""
+    if isinstance(states, str):
+        states = [states]
+    arr = np.asarray(states)
+    if arr.dtype == bool:
+        if arr.shape != (model.n_states,):
+            raise SpecificationError(
+                f"{what} mask must have shape ({model.n_states},), got {arr.shape}"
+            )
+        return arr.copy()
+    if arr.size == 0:
+        return np.zeros(model.n_states, dtype=bool)
+    if arr.dtype.kind in "US":
+        mask = np.zeros(model.n_states, dtype=bool)
+        for name in arr.tolist():
+            if name not in model.propositions:
+                raise SpecificationError(
+                    f"{what} label {name!r} is not among the model's propositions "
+                    f"{model.propositions}"
+                )
+            mask |= model.label_matrix[:, model.propositions.index(name)]
+        return mask
+    if arr.dtype.kind in "iu":
+        bad = arr[(arr < 0) | (arr >= model.n_states)]
+        if bad.size:
+            raise SpecificationError(f"{what} state {bad[0]} is not in [0, {model.n_states})")
+        mask = np.zeros(model.n_states, dtype=bool)
+        mask[arr] = True
+        return mask
+    raise SpecificationError(f"cannot read {what} states from {states!r}")
+
+
+@dataclass(frozen=True)
+class ValueIteration:
+    """Robust value iteration with the state-ordering adversary.
+
+    Args:
+        tolerance: stop when ``max |V_k - V_{k-1}| < tolerance`` (default 1e-8).
+        max_iterations: give up after this many sweeps (the solution then reports
+            ``converged=False``).
+        callback: called as ``callback(iteration, residual)`` after every sweep.
+        precompute: settle the states of (worst- or best-case) reachability probability
+            0 and (worst case) 1 by graph analysis before iterating (default). Without it
+            the iteration alone approaches the same least fixed point, more slowly.
+    """
+
+    tolerance: float = 1e-8
+    max_iterations: int = 1_000_000
+    callback: Callable[[int, float], None] | None = None
+    precompute: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.tolerance > 0:
+            raise SpecificationError(f"tolerance must be positive, got {self.tolerance}")
+        if self.max_iterations < 1:
+            raise SpecificationError(f"max_iterations must be >= 1, got {self.max_iterations}")
+
+
+@dataclass
+class Solution:
+    """Result of :func:`solve`.
+
+    Attributes:
+        values: ``(n_states,)`` optimal values.
+        strategy: ``(n_states,)`` chosen action per state (-1: none; targets, avoided
+            states, states settled by graph analysis and states without allowed actions).
+        residual: the last ``max |V_k - V_{k-1}|`` (a sweep with the exact order).
+        iterations: the number of sweeps.
+        converged: whether ``residual < tolerance``.
+        fixed: ``(n_states,)`` mask of the states whose value was set without iteration.
+        q_values: ``(n_rows,)`` robust value of every row under the final values
+            (``nan`` for rows outside the allowed sub-model); computed on first access.
+    """
+
+    values: np.ndarray
+    strategy: np.ndarray
+    residual: float
+    iterations: int
+    converged: bool = True
+    fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    _q: Callable[[], np.ndarray] | None = field(default=None, repr=False)
+    _q_cache: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def q_values(self) -> np.ndarray:
+        if self._q_cache is None:
+            if self._q is None:
+                raise SpecificationError("this solution carries no row values")
+            self._q_cache = self._q()
+        return self._q_cache
+
+
+def _reduce(model: IMDP, q: np.ndarray, maximize: bool) -> np.ndarray:
+    op = np.maximum if maximize else np.minimum
+    return op.reduceat(q, model.state_ptr[:-1])
+
+
+def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution:
+    """Solve ``problem`` by robust value iteration (see the module docstring)."""
+    alg = ValueIteration() if algorithm is None else algorithm
+    m = problem.model
+    spec = problem.specification
+    maximize = spec.strategy == "maximize"
+    pessimistic = spec.satisfaction == "pessimistic"
+    adversary_minimizes = maximize == pessimistic
+    rows = problem.row_mask()
+    n = m.n_states
+    acting = graph.has_row(m, rows)
+    fixed = ~acting
+    fixed_val = np.zeros(n)
+    reward: np.ndarray | None = None
+    discount = 1.0
+    prob1_choice = np.full(n, -1, dtype=np.int64)
+    prob1 = np.zeros(n, dtype=bool)
+    prop = spec.property
+    if isinstance(prop, ReachAvoid):
+        target = resolve_states(m, prop.target, "target")
+        avoid = (
+            np.zeros(n, dtype=bool)
+            if prop.avoid is None
+            else resolve_states(m, prop.avoid, "avoid") & ~target
+        )
+        if not alg.precompute:
+            zero = np.zeros(n, dtype=bool)
+        elif maximize and pessimistic:
+            pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
+            prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows)
+            zero = ~pos
+        elif maximize:
+            zero = ~graph.possible_reach(m, target, avoid, rows)
+        else:
+            zero = np.zeros(n, dtype=bool)
+        fixed = fixed | target | avoid | zero | prob1
+        fixed_val = np.where(target | prob1, 1.0, 0.0)
+    else:
+        reward = np.asarray(prop.reward, dtype=np.float64)
+        discount = float(prop.discount)
+    fixed_val = np.where(fixed, fixed_val, 0.0)
+
+    free = ~fixed
+    free_rows = np.flatnonzero(rows & free[m.row_state])
+    rs = m.row_state[free_rows]
+    seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1]))) if rs.size else rs
+    seg_states = rs[seg]
+    op = np.maximum if maximize else np.minimum
+
+    def backup(v: np.ndarray) -> np.ndarray:
+        return v if reward is None else reward + discount * v
+
+    # Reachability: sweeps use OrderingAdversary.lower_bound (no sorting; the order is
+    # refreshed every `refresh` sweeps). From v <= T(v) the iterates then increase and stay
+    # below the least fixed point. Once the residual is below the tolerance, sweeps use the
+    # exact order until the residual is below the tolerance again (the reported residual).
+    # Discounted reward: exact sweeps that tolerate successors out of order by less than
+    # tolerance / 100.
+    reach = reward is None
+    full = OrderingAdversary(
+        m,
+        adversary_minimizes,
+        rows=free_rows,
+        resort_tolerance=0.0 if reach else alg.tolerance * 1e-2,
+    )
+    refresh = 8
+    v = fixed_val.copy()
+    residual = 0.0
+    it = 0
+    exact = not reach
+    while free_rows.size and it < alg.max_iterations:
+        it += 1
+        bv = backup(v)
+        if exact:
+            q_free = full.expectation(bv)
+        else:
+            if it % refresh == 0:
+                full.update(bv)
+            q_free = full.lower_bound(bv)
+        v_new = v.copy()
+        best = op.reduceat(q_free, seg)
+        v_new[seg_states] = np.maximum(best, v[seg_states]) if reach else best
+        residual = float(np.max(np.abs(v_new - v)))
+        v = v_new
+        if alg.callback is not None:
+            alg.callback(it, residual)
+        if residual < alg.tolerance:
+            if exact and full.resort_tolerance == 0.0:
+                break
+            exact = True
+            full.resort_tolerance = 0.0
+    q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
+    strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
+    if isinstance(prop, ReachAvoid) and maximize and pessimistic:
+        strategy = np.where(prob1 & (prob1_choice >= 0), m.row_action[prob1_choice], strategy)
+    final_v = backup(v)
+
+    def all_q() -> np.ndarray:
+        q = np.full(m.n_rows, np.nan)
+        all_rows = np.flatnonzero(rows)
+        if all_rows.size:
+            adv = OrderingAdversary(m, adversary_minimizes, rows=all_rows)
+            q[all_rows] = adv.expectation(final_v)
+        return q
+
+    return Solution(
+        values=v,
+        strategy=strategy,
+        residual=residual,
+        iterations=it,
+        converged=bool(residual < alg.tolerance),
+        fixed=fixed,
+        _q=all_q,
+    )
+
+
+def _strategy(
+    m: IMDP,
+    free_rows: np.ndarray,
+    q_free: np.ndarray,
+    seg: np.ndarray,
+    seg_states: np.ndarray,
+    v: np.ndarray,
+    maximize: bool,
+    prop: ReachAvoid | DiscountedReward,
+    tol: float,
+) -> np.ndarray:
+    """Memoryless strategy: an optimal row per free state (-1 elsewhere).
+
+    For maximal reachability, optimal rows are picked by a robust attractor from the
+    states already settled (value fixed, or 0), so the strategy cannot idle inside an end
+    component whose optimal rows all tie: each chosen row moves one layer closer with
+    positive probability under every adversary.
+    """
+    n = m.n_states
+    choice = np.full(n, -1, dtype=np.int64)
+    if free_rows.size == 0:
+        return choice
+    rs = m.row_state[free_rows]
+    best = (np.maximum if maximize else np.minimum).reduceat(q_free, seg)
+    best_of = np.zeros(n)
+    best_of[seg_states] = best
+    slack = max(10 * tol, 1e-12)
+    opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
+    first = opt_local[first_of_runs(rs[opt_local])]
+    choice[rs[first]] = free_rows[first]
+    if isinstance(prop, ReachAvoid) and maximize:
+        free = np.zeros(n, dtype=bool)
+        free[seg_states] = True
+        settled = ~free | (v <= 0)
+        cand = np.zeros(m.n_rows, dtype=bool)
+        cand[free_rows[opt_local]] = True
+        _, attr = graph._attractor(m, settled, cand)
+        choice = np.where((attr >= 0) & free, attr, choice)
+    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)

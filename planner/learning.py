@@ -1,0 +1,267 @@
+"""One re-synthesis of the learning loop, run after every batch of hops (pure planning).
+
+Steps (DESIGN.md "Rewards and policies"), timed separately:
+
+1. ``gp_fit``: refit the landing-error GPs on all data (warm-started).
+2. ``abstraction``: per-cell error bounds, transition intervals, the grid IMDP and the
+   MT-PIMDP product with the automaton and the reward.
+3. ``synthesis``: worst-case satisfaction probabilities; the nonviolating sub-model; the
+   paper's MEC choice among the robustly *accepting* end components (those that satisfy the
+   mandatory task; the pessimistic MECs of the nonviolating sub-model only if there are none),
+   preferring sure reachability, then the highest worst-case probability, then average
+   reward; the strategy steering there within the nonviolating sub-model (exploration's LTL
+   action). Where the worst-case probability of reaching it is 0 (early on, when the wide
+   prior intervals let the adversary cut every way), the steering strategy maximises the
+   *best-case* probability instead, so that exploration heads where the goal may be reached
+   and collects data there, while safety still comes from the nonviolating sub-model; where
+   even that is 0 (the goal lies beyond the current safe region), :func:`frontier_strategy`
+   heads for the edge of the safe region nearest to it; the
+   satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
+   Q-values on the nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown
+   reward: the learner's warm-started sweep on its learned rewards); a fallback plan for
+   states without a nonviolating action: every enabled action allowed, the LTL action
+   maximising the worst-case satisfaction probability (the best-case one where the worst
+   case is 0).
+
+The result holds everything a runner needs to act: the two :class:`PhasePlan` objects, the
+worst-case satisfaction probabilities and the RL actor, ready for
+:meth:`planner.policy.SwitchingPolicy.resynthesise`. Nothing is printed or logged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse.csgraph import dijkstra
+
+from planner.automaton import RabinAutomaton
+from planner.errors import PolicyError
+from planner.gp.landing import FitReport, LandingErrorGP
+from planner.imdp import IMDP, Problem, ReachAvoid, Solution, Specification, graph, solve
+from planner.imdp.graph import SubModel
+from planner.imdp.grid import GridWorld
+from planner.imdp.product import MecChoice, ProductIMDP
+from planner.intervals import (
+    CellErrorBounds,
+    TransitionIntervals,
+    TruncatedGaussianNoise,
+    cell_error_bounds,
+    transition_intervals,
+)
+from planner.policy import PhasePlan, RLActor
+from planner.qlearning import GreedyQ, QSolution, RobustQLearner, robust_q_iteration
+
+
+def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+    """Per state, the allowed action that heads for ``target`` through the *whole* model.
+
+    ``d(s)`` is the least number of hops from ``s`` to ``target`` along edges with
+    ``upper > 0`` of any action (unreachable: ``n_states``); an action's score is the mean of
+    ``d`` over its successors weighted by their upper bounds; the allowed action of least
+    score wins (-1 where nothing is allowed). A heuristic for exploration only: it moves the
+    robot to the edge of its safe region nearest the target, where new data widen that
+    region; it carries no probability guarantee.
+    """
+    g = graph.state_graph(model)
+    tgt = np.flatnonzero(np.asarray(target, dtype=bool))
+    if tgt.size == 0:
+        return np.full(model.n_states, -1, dtype=np.int64)
+    dist = dijkstra(g.T.tocsr(), unweighted=True, indices=tgt, min_only=True)
+    dist = np.where(np.isfinite(dist), dist, float(model.n_states))
+    w = model.upper
+    num = np.bincount(model.entry_row, weights=w * dist[model.successor], minlength=model.n_rows)
+    den = np.bincount(model.entry_row, weights=w, minlength=model.n_rows)
+    score = np.where(den > 0, num / np.maximum(den, 1e-300), np.inf)
+    ok = np.asarray(allowed, dtype=bool)[model.row_state, model.row_action]
+    score = np.where(ok, score, np.inf)
+    best = np.minimum.reduceat(score, model.state_ptr[:-1])
+    first = np.full(model.n_states, -1, dtype=np.int64)
+    is_best = ok & (score == best[model.row_state]) & np.isfinite(score)
+    idx = np.flatnonzero(is_best)[::-1]  # reversed: the lowest row index is written last
+    first[model.row_state[idx]] = model.row_action[idx]
+    return first
+
+
+@dataclass(frozen=True)
+class ResynthesisSettings:
+    """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
+    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``).
+
+    ``candidates``: the end components the exploration steers to: ``"accepting"`` (default;
+    the robustly accepting ones, falling back to the next option if there are none) or
+    ``"nonviolating"`` (all pessimistic MECs of the nonviolating sub-model, the paper's
+    literal reading).
+    """
+
+    samples_per_axis: int = 5
+    delta: float = 0.01
+    beta: float | None = None
+    noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
+    p_sat: float = 0.65
+    discount: float = 0.95
+    q_tolerance: float = 1e-6
+    candidates: str = "accepting"
+
+    def __post_init__(self) -> None:
+        if self.candidates not in ("accepting", "nonviolating"):
+            raise PolicyError(
+                f"candidates must be 'accepting' or 'nonviolating', got {self.candidates!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Resynthesis:
+    """Everything one re-synthesis produced; ``timings`` in seconds per step
+    (``gp_fit``, ``abstraction``, ``synthesis``), ``synthesis_detail`` splits the last."""
+
+    fit: FitReport
+    bounds: CellErrorBounds
+    intervals: TransitionIntervals
+    model: IMDP
+    product: ProductIMDP
+    satisfaction: Solution
+    nonviolating: SubModel
+    satisfying: SubModel
+    mec: MecChoice | None
+    exploration: PhasePlan
+    goal: PhasePlan
+    fallback: PhasePlan
+    q: QSolution
+    rl: RLActor
+    timings: dict[str, float]
+    synthesis_detail: dict[str, float]
+
+
+def resynthesise(
+    gp: LandingErrorGP,
+    grid: GridWorld,
+    automaton: RabinAutomaton,
+    positions: np.ndarray,
+    errors: np.ndarray,
+    *,
+    reward: np.ndarray | None = None,
+    learner: RobustQLearner | None = None,
+    initial_cell: int = 0,
+    current_state: int | None = None,
+    settings: ResynthesisSettings | None = None,
+    previous: Resynthesis | None = None,
+    clock: Callable[[], float] = time.perf_counter,
+) -> Resynthesis:
+    """Refit, rebuild and re-synthesise (see the module docstring).
+
+    Args:
+        gp: the landing-error model, refitted in place on ``positions``/``errors``.
+        grid: the world (labels included).
+        automaton: the Rabin automaton of the mandatory task.
+        positions, errors: all departure positions and landing errors so far, ``(N, 2)``.
+        reward: known ``W`` per grid state (``grid.n_states``); exactly one of ``reward``
+            and ``learner`` must be given.
+        learner: for an unknown reward, a learner over the product states whose cells are
+            the grid states (``state_cell = product.base_state``); its learned rewards
+            (prior where unvisited) stand in for ``W`` in the product and the MEC choice.
+        initial_cell: the IMDP's initial grid state.
+        current_state: product state the MEC choice starts from (default: the initial).
+        settings: see :class:`ResynthesisSettings`.
+        previous: the last re-synthesis of this run; its Q-table warm-starts the known-reward
+            Q-iteration (same grid and automaton, so the same product states).
+        clock: time source for ``timings``.
+    """
+    if (reward is None) == (learner is None):
+        raise PolicyError("give exactly one of reward (known W) and learner (unknown W)")
+    s = settings or ResynthesisSettings()
+    t0 = clock()
+    fit = gp.fit(positions, errors)
+    t1 = clock()
+    bounds = cell_error_bounds(
+        gp, grid, samples_per_axis=s.samples_per_axis, delta=s.delta, beta=s.beta
+    )
+    intervals = transition_intervals(bounds, grid, s.noise)
+    model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
+    if reward is not None:
+        w = np.asarray(reward, dtype=np.float64)
+    else:
+        assert learner is not None
+        w = learner.cell_reward()
+        if w.shape != (grid.n_states,):
+            raise PolicyError(
+                f"the learner's reward cells must be the {grid.n_states} grid states, got "
+                f"{w.shape[0]}"
+            )
+    product = ProductIMDP(model, automaton, w)
+    t2 = clock()
+    detail: dict[str, float] = {}
+    last = [t2]
+
+    def lap(name: str) -> None:
+        now = clock()
+        detail[name] = now - last[0]
+        last[0] = now
+
+    pm = product.model
+    satisfaction = product.satisfaction()
+    lap("satisfaction")
+    nonviolating = product.nonviolating()
+    lap("nonviolating")
+    start = product.initial if current_state is None else int(current_state)
+    mecs = product.accepting_end_components() if s.candidates == "accepting" else []
+    if not mecs:
+        mecs = product.end_components(nonviolating.actions)
+    mec = None
+    if mecs:
+        mec = product.choose_mec(mecs, state=start, allowed=nonviolating.actions)
+        lap("mec_choice")
+        steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
+        inside = mec.component.state_mask(pm.n_states)
+        if ((steer < 0) & ~inside).any():
+            spec = Specification(ReachAvoid(inside), satisfaction="optimistic")
+            hopeful = solve(Problem(pm, spec, nonviolating.actions)).strategy
+            steer = np.where((steer < 0) & ~inside, hopeful, steer)
+        if ((steer < 0) & ~inside).any():
+            frontier = frontier_strategy(pm, inside, nonviolating.actions)
+            steer = np.where((steer < 0) & ~inside, frontier, steer)
+    else:
+        steer = product.goal_strategy(allowed=nonviolating.actions)
+    lap("steering")
+    best = satisfaction.strategy
+    if (best < 0).any():
+        best = np.where(best >= 0, best, product.satisfaction(pessimistic=False).strategy)
+    lap("fallback")
+    satisfying = product.satisfying(s.p_sat, satisfaction)
+    goal = product.goal_strategy(allowed=satisfying.actions)
+    lap("goal_strategy")
+    if learner is None:
+        q = robust_q_iteration(
+            pm,
+            product.reward,
+            discount=s.discount,
+            allowed=nonviolating.actions,
+            initial=None if previous is None else previous.q.q,
+            tolerance=s.q_tolerance,
+        )
+        rl: RLActor = GreedyQ(np.nan_to_num(q.q, nan=-np.inf))
+    else:
+        q = learner.sweep(pm, allowed=nonviolating.actions, tolerance=s.q_tolerance)
+        rl = learner
+    lap("q_values")
+    t3 = clock()
+    return Resynthesis(
+        fit=fit,
+        bounds=bounds,
+        intervals=intervals,
+        model=model,
+        product=product,
+        satisfaction=satisfaction,
+        nonviolating=nonviolating,
+        satisfying=satisfying,
+        mec=mec,
+        exploration=PhasePlan.masked(nonviolating.actions, steer),
+        goal=PhasePlan.masked(satisfying.actions, goal),
+        fallback=PhasePlan.masked(pm.enabled.copy(), best),
+        q=q,
+        rl=rl,
+        timings={"gp_fit": t1 - t0, "abstraction": t2 - t1, "synthesis": t3 - t2},
+        synthesis_detail=detail,
+    )

@@ -1,0 +1,280 @@
+"""The exploration and goal-reaching policies and the switch between them.
+
+Both phases mix an LTL action and an RL (reward) action, drawn *only* from the allowed actions
+of a sub-model, so that no mix of the two trades away safety:
+
+* **Exploration** (before the switch): the allowed actions are those of the *nonviolating*
+  sub-model; the LTL action steers towards the chosen MEC; the RL action (from an
+  :class:`RLActor`, e.g. robust Q-values) is taken with probability ``P_RL,ee``.
+* **Goal reaching** (after the switch): the allowed actions are those of the *satisfying*
+  sub-model; the LTL action comes from the goal-reaching strategy; the RL action is taken with
+  probability ``P_RL,gr = C exp(-eps m)``, ``m`` the number of steps taken in this phase
+  (0 at the first goal-reaching step).
+
+Switch: at a decision in state ``q``, exploration turns into goal reaching as soon as the
+worst-case satisfaction probability of ``q`` *exceeds* ``P_sat`` and the satisfying sub-model
+allows an action in ``q``. The phase then stays goal reaching; only if a later re-synthesis
+leaves the current state without an allowed goal-reaching action does the policy fall back to
+exploration (reported in the decision), and it switches again under the same rule.
+
+Fallback: where the nonviolating sub-model allows no action in the current state (typically at
+the start, when the prior's wide intervals let every hop possibly leave the world or reach a
+hazard), no action is safe by the abstraction's standard. If a fallback plan is installed
+(e.g. all enabled actions, with the action that maximises the worst-case satisfaction
+probability as its LTL action), the policy takes its LTL action (its RL action where it has
+none) and reports the phase ``"fallback"``; without one it raises :class:`PolicyError`.
+
+An LTL strategy entry of -1 (no LTL preference, e.g. a state the strategy treats as reached)
+makes the policy take the RL action, reported with source ``"RL"``.
+
+Randomness: every decision draws one uniform number from the caller's generator for the
+LTL/RL choice (always, so the stream does not depend on the probabilities), and the RL actor
+may draw more; the same generator state gives the same decisions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from planner.errors import PolicyError
+
+EXPLORATION = "exploration"
+GOAL_REACHING = "goal_reaching"
+FALLBACK = "fallback"
+LTL = "LTL"
+RL = "RL"
+
+
+class RLActor(Protocol):
+    """Chooses a reward-seeking action among ``allowed`` (``(n_actions,)`` boolean mask)."""
+
+    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int: ...
+
+
+@dataclass(frozen=True)
+class PhasePlan:
+    """What one phase needs from a synthesis.
+
+    Attributes:
+        allowed: ``(n_states, n_actions)`` boolean mask of the sub-model's allowed actions.
+        ltl_action: ``(n_states,)`` the LTL strategy's action per state (-1: none).
+    """
+
+    allowed: np.ndarray
+    ltl_action: np.ndarray
+
+    @classmethod
+    def masked(cls, allowed: np.ndarray, strategy: np.ndarray) -> PhasePlan:
+        """A plan from a strategy that may name actions outside ``allowed``: those entries
+        become -1 (no LTL preference), so the RL action is taken there."""
+        allowed = np.asarray(allowed, dtype=bool)
+        strategy = np.asarray(strategy, dtype=np.int64)
+        if allowed.ndim != 2 or strategy.shape != (allowed.shape[0],):
+            raise PolicyError(
+                f"strategy of shape {strategy.shape} does not fit allowed {allowed.shape}"
+            )
+        ok = (strategy >= 0) & (strategy < allowed.shape[1])
+        idx = np.flatnonzero(ok)
+        ok[idx] = allowed[idx, strategy[idx]]
+        return cls(allowed, np.where(ok, strategy, -1))
+
+    def __post_init__(self) -> None:
+        allowed = np.asarray(self.allowed)
+        ltl = np.asarray(self.ltl_action)
+        if allowed.ndim != 2 or allowed.dtype != bool:
+            raise PolicyError(f"allowed must be a 2-D boolean mask, got {allowed.dtype}")
+        if ltl.shape != (allowed.shape[0],) or ltl.dtype.kind not in "iu":
+            raise PolicyError(f"ltl_action must be integers of shape ({allowed.shape[0]},)")
+        if ((ltl < -1) | (ltl >= allowed.shape[1])).any():
+            raise PolicyError(f"ltl_action values must lie in [-1, {allowed.shape[1]})")
+        has = ltl >= 0
+        bad = np.flatnonzero(has & ~allowed[np.arange(ltl.size), np.where(has, ltl, 0)])
+        if bad.size:
+            s = int(bad[0])
+            raise PolicyError(
+                f"state {s}: LTL action {int(ltl[s])} is not among the allowed actions "
+                f"{np.flatnonzero(allowed[s]).tolist()}"
+            )
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision: the action, where it came from and what else was allowed.
+
+    Attributes:
+        action: the chosen action.
+        phase: ``"exploration"``, ``"goal_reaching"`` or ``"fallback"``.
+        source: ``"LTL"`` or ``"RL"``.
+        allowed: the allowed actions in this state (the backup controller picks among them).
+        p_rl: the probability with which the RL action was to be taken.
+        phase_step: ``m``, the number of earlier steps in the current phase.
+        sat_probability: worst-case satisfaction probability of the state.
+        switched: this decision switched the phase (to goal reaching, or back).
+    """
+
+    action: int
+    phase: str
+    source: str
+    allowed: tuple[int, ...]
+    p_rl: float
+    phase_step: int
+    sat_probability: float
+    switched: bool
+
+
+def _check_prob(name: str, value: float) -> None:
+    if not 0.0 <= value <= 1.0:
+        raise PolicyError(f"{name} must lie in [0, 1], got {value}")
+
+
+def _mix(
+    plan: PhasePlan, rl: RLActor, state: int, p_rl: float, rng: np.random.Generator
+) -> tuple[int, str, np.ndarray]:
+    allowed = np.asarray(plan.allowed[state], dtype=bool)
+    if not allowed.any():
+        raise PolicyError(f"state {state} has no allowed action in this phase's sub-model")
+    u = rng.random()
+    ltl = int(plan.ltl_action[state])
+    if u < p_rl or ltl < 0:
+        action = int(rl.act(state, allowed, rng))
+        if not allowed[action]:
+            raise PolicyError(f"state {state}: the RL actor chose action {action}, not allowed")
+        return action, RL, allowed
+    return ltl, LTL, allowed
+
+
+class ExplorationPolicy:
+    """LTL action towards the chosen MEC, RL action with probability ``p_rl``."""
+
+    def __init__(self, plan: PhasePlan, rl: RLActor, p_rl: float) -> None:
+        _check_prob("P_RL,ee", p_rl)
+        self.plan, self.rl, self.p_rl = plan, rl, float(p_rl)
+
+    def choose(self, state: int, rng: np.random.Generator) -> tuple[int, str, np.ndarray]:
+        """``(action, source, allowed mask)`` in ``state``."""
+        return _mix(self.plan, self.rl, state, self.p_rl, rng)
+
+
+class GoalReachingPolicy:
+    """LTL goal-reaching action, RL action with probability ``C exp(-eps m)``."""
+
+    def __init__(self, plan: PhasePlan, rl: RLActor, c: float, eps: float) -> None:
+        _check_prob("C", c)
+        _check_prob("eps", eps)
+        self.plan, self.rl, self.c, self.eps = plan, rl, float(c), float(eps)
+
+    def p_rl(self, m: int) -> float:
+        """``P_RL,gr = C exp(-eps m)``."""
+        return self.c * float(np.exp(-self.eps * m))
+
+    def choose(self, state: int, m: int, rng: np.random.Generator) -> tuple[int, str, np.ndarray]:
+        return _mix(self.plan, self.rl, state, self.p_rl(m), rng)
+
+
+@dataclass(frozen=True)
+class SwitchingSettings:
+    """``p_rl_explore`` = P_RL,ee; ``c``, ``eps`` of P_RL,gr = C exp(-eps m); ``p_sat``."""
+
+    p_rl_explore: float = 0.5
+    c: float = 0.5
+    eps: float = 0.005
+    p_sat: float = 0.65
+
+    def __post_init__(self) -> None:
+        for name in ("p_rl_explore", "c", "eps", "p_sat"):
+            _check_prob(name, float(getattr(self, name)))
+
+
+class SwitchingPolicy:
+    """Exploration until the worst-case satisfaction probability exceeds ``p_sat``, then goal
+    reaching (see the module docstring). Call :meth:`resynthesise` after every re-synthesis
+    and :meth:`decide` once per hop.
+    """
+
+    def __init__(self, settings: SwitchingSettings, rl: RLActor | None = None) -> None:
+        self.settings = settings
+        self.rl = rl
+        self.exploration: ExplorationPolicy | None = None
+        self.goal: GoalReachingPolicy | None = None
+        self.fallback: ExplorationPolicy | None = None
+        self.sat_probability: np.ndarray | None = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new run: exploration phase, no steps taken."""
+        self.phase = EXPLORATION
+        self.phase_step = 0
+        self.step = 0
+        self.switch_step: int | None = None
+        self.switch_probability: float | None = None
+
+    def resynthesise(
+        self,
+        exploration: PhasePlan,
+        goal: PhasePlan,
+        sat_probability: np.ndarray,
+        fallback: PhasePlan | None = None,
+        rl: RLActor | None = None,
+    ) -> None:
+        """Install the plans of a new synthesis (phase and step counters are kept); ``rl``
+        replaces the RL actor when given."""
+        if rl is not None:
+            self.rl = rl
+        if self.rl is None:
+            raise PolicyError("no RL actor: pass rl here or to the constructor")
+        sat = np.asarray(sat_probability, dtype=np.float64)
+        shape = np.asarray(exploration.allowed).shape
+        shapes = [np.asarray(p.allowed).shape for p in (goal, fallback) if p is not None]
+        if any(sh != shape for sh in shapes) or sat.shape != (shape[0],):
+            raise PolicyError(
+                f"plans and sat_probability disagree in shape: {shape}, {shapes}, {sat.shape}"
+            )
+        if not np.isfinite(sat).all() or (sat < 0).any() or (sat > 1).any():
+            raise PolicyError("sat_probability must lie in [0, 1]")
+        s = self.settings
+        self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore)
+        self.goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)
+        self.fallback = None if fallback is None else ExplorationPolicy(fallback, self.rl, 0.0)
+        self.sat_probability = sat
+
+    def decide(self, state: int, rng: np.random.Generator) -> Decision:
+        """Choose the action in (product) state ``state``."""
+        if self.exploration is None or self.goal is None or self.sat_probability is None:
+            raise PolicyError("decide called before resynthesise")
+        if not 0 <= state < self.sat_probability.size:
+            raise PolicyError(f"state {state} is not in [0, {self.sat_probability.size})")
+        sat = float(self.sat_probability[state])
+        goal_ok = bool(np.asarray(self.goal.plan.allowed[state]).any())
+        switched = False
+        if self.phase == EXPLORATION and sat > self.settings.p_sat and goal_ok:
+            self.phase, self.phase_step, switched = GOAL_REACHING, 0, True
+            self.switch_step, self.switch_probability = self.step, sat
+        elif self.phase == GOAL_REACHING and not goal_ok:
+            self.phase, self.phase_step, switched = EXPLORATION, 0, True
+        explore_ok = bool(np.asarray(self.exploration.plan.allowed[state]).any())
+        phase = self.phase
+        if self.phase == GOAL_REACHING:
+            p_rl = self.goal.p_rl(self.phase_step)
+            action, source, allowed = self.goal.choose(state, self.phase_step, rng)
+        elif not explore_ok and self.fallback is not None:
+            phase, p_rl = FALLBACK, 0.0
+            action, source, allowed = self.fallback.choose(state, rng)
+        else:
+            p_rl = self.exploration.p_rl
+            action, source, allowed = self.exploration.choose(state, rng)
+        decision = Decision(
+            action=action,
+            phase=phase,
+            source=source,
+            allowed=tuple(int(a) for a in np.flatnonzero(allowed)),
+            p_rl=p_rl,
+            phase_step=self.phase_step,
+            sat_probability=sat,
+            switched=switched,
+        )
+        self.phase_step += 1
+        self.step += 1
+        return decision

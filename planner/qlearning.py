@@ -1,0 +1,408 @@
+"""Robust Q-learning on interval MDPs with the minimising (state-ordering) adversary.
+
+Reward ``W`` is collected on *landing* (DESIGN.md), so for a row ``(s, a)`` with interval
+bounds ``l <= p <= u`` the robust Q-value is the worst case over the interval polytope::
+
+    Q(s, a) = min_{l <= p <= u, sum p = 1}  sum_{s'} p(s') (W(s') + gamma V(s')),
+    V(s)    = max_{a allowed in s} Q(s, a)        (0 where no action is allowed)
+
+The minimum is evaluated by :class:`planner.imdp.OrderingAdversary` (Lahijanian et al. 2015),
+so the values are lower bounds on the reward of every distribution inside the intervals.
+
+* Known ``W``: :func:`robust_q_iteration` iterates the equations to a fixed point (a
+  contraction with factor ``gamma``: error ``<= gamma / (1 - gamma) * residual``).
+* Unknown ``W``: :class:`RobustQLearner` learns the reward of a cell from visits (the mean of
+  the rewards observed on landing there; unvisited cells carry ``prior_reward``, by default
+  optimistic, so that greedy choices are drawn towards unexplored cells) and learns ``Q`` by
+  asynchronous robust updates ``Q(s, a) <- (1 - alpha) Q(s, a) + alpha * target(s, a)`` on
+  the visited rows (online, epsilon-greedy) plus full sweeps after each re-synthesis.
+  ``Q`` and the learned rewards are saved and loaded (:meth:`RobustQLearner.save`,
+  :meth:`RobustQLearner.load`) so they persist across runs while the GP data is reset.
+
+States of the model are mapped to reward *cells* by ``state_cell`` (identity by default; for a
+product model, the grid cell of each product state), so that rewards are learned per cell.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from planner.errors import QTableError
+from planner.imdp import IMDP, OrderingAdversary
+
+FORMAT_TAG = "hopnav-robust-q"
+FORMAT_VERSION = 1
+
+
+def _allowed_rows(model: IMDP, allowed: np.ndarray | None) -> np.ndarray:
+    if allowed is None:
+        return np.ones(model.n_rows, dtype=bool)
+    allowed = np.asarray(allowed)
+    if allowed.dtype != bool or allowed.shape != (model.n_states, model.n_actions):
+        raise QTableError(
+            f"allowed must be a boolean ({model.n_states}, {model.n_actions}) mask, got "
+            f"{allowed.dtype} {allowed.shape}"
+        )
+    return allowed[model.row_state, model.row_action]
+
+
+def _state_values(model: IMDP, q_rows: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``V(s) = max`` over the allowed rows of ``s`` (0 where none is allowed)."""
+    qq = np.where(rows, q_rows, -np.inf)
+    v = np.maximum.reduceat(qq, model.state_ptr[:-1]) if model.n_rows else np.zeros(0)
+    return np.where(np.isfinite(v), v, 0.0)
+
+
+def _rows_to_table(model: IMDP, q_rows: np.ndarray) -> np.ndarray:
+    table = np.full((model.n_states, model.n_actions), np.nan)
+    table[model.row_state, model.row_action] = q_rows
+    return table
+
+
+@dataclass(frozen=True)
+class QSolution:
+    """Result of :func:`robust_q_iteration`.
+
+    Attributes:
+        q: ``(n_states, n_actions)`` robust Q-values (``nan`` for disabled actions).
+        values: ``(n_states,)`` ``V = max`` over allowed actions.
+        residual: last ``max |V_k - V_{k-1}|``.
+        iterations: number of sweeps.
+        converged: ``residual < tolerance``.
+    """
+
+    q: np.ndarray
+    values: np.ndarray
+    residual: float
+    iterations: int
+    converged: bool
+
+
+def robust_q_iteration(
+    model: IMDP,
+    reward: np.ndarray,
+    *,
+    discount: float = 0.95,
+    allowed: np.ndarray | None = None,
+    initial: np.ndarray | None = None,
+    tolerance: float = 1e-8,
+    max_iterations: int = 100_000,
+    adversary: OrderingAdversary | None = None,
+    callback: Callable[[int, float], None] | None = None,
+) -> QSolution:
+    """Robust Q-iteration for a known reward ``reward`` (per model state, collected on landing).
+
+    Args:
+        model: the interval MDP.
+        reward: ``(n_states,)`` reward of landing in each state.
+        discount: ``gamma`` in ``[0, 1)``.
+        allowed: ``(n_states, n_actions)`` mask of the actions ``V`` may maximise over
+            (a sub-model); default all enabled actions.
+        initial: ``(n_states, n_actions)`` Q-table to warm-start from (``nan`` ignored).
+        tolerance: stop when ``max |V_k - V_{k-1}| < tolerance``.
+        max_iterations: at most this many sweeps.
+        adversary: a minimising :class:`OrderingAdversary` of ``model`` to reuse.
+        callback: ``callback(iteration, residual)`` after every sweep.
+    """
+    w = np.asarray(reward, dtype=np.float64)
+    if w.shape != (model.n_states,) or not np.isfinite(w).all():
+        raise QTableError(f"reward must be a finite array of shape ({model.n_states},)")
+    if not 0.0 <= discount < 1.0:
+        raise QTableError(f"discount must lie in [0, 1), got {discount}")
+    if not tolerance > 0.0 or max_iterations < 1:
+        raise QTableError(f"need tolerance > 0 and max_iterations >= 1, got {tolerance}")
+    rows = _allowed_rows(model, allowed)
+    adv = adversary if adversary is not None else OrderingAdversary(model, minimize=True)
+    if adv.model is not model or not adv.minimize:
+        raise QTableError("adversary must be a minimising OrderingAdversary of this model")
+    if initial is None:
+        v = np.zeros(model.n_states)
+    else:
+        init = np.asarray(initial, dtype=np.float64)
+        if init.shape != (model.n_states, model.n_actions):
+            raise QTableError(
+                f"initial Q-table must have shape ({model.n_states}, {model.n_actions}), "
+                f"got {init.shape}"
+            )
+        q0 = init[model.row_state, model.row_action]
+        v = _state_values(model, np.nan_to_num(q0, nan=-np.inf), rows)
+    residual = np.inf
+    it = 0
+    q_rows = np.zeros(model.n_rows)
+    while it < max_iterations:
+        it += 1
+        q_rows = adv.expectation(w + discount * v)
+        v_new = _state_values(model, q_rows, rows)
+        residual = float(np.max(np.abs(v_new - v))) if v.size else 0.0
+        v = v_new
+        if callback is not None:
+            callback(it, residual)
+        if residual < tolerance:
+            break
+    q_rows = adv.expectation(w + discount * v)
+    return QSolution(_rows_to_table(model, q_rows), v, residual, it, residual < tolerance)
+
+
+def greedy_action(q_row: np.ndarray, allowed: np.ndarray) -> int:
+    """The allowed action of largest Q-value (lowest index on ties); ``allowed`` (n_actions,)."""
+    allowed = np.asarray(allowed, dtype=bool)
+    if not allowed.any():
+        raise QTableError("no allowed action to choose from")
+    scores = np.where(allowed, np.nan_to_num(np.asarray(q_row, float), nan=-np.inf), -np.inf)
+    best = np.flatnonzero(scores == scores.max())
+    if best.size == 0 or not np.isfinite(scores.max()):
+        return int(np.flatnonzero(allowed)[0])
+    return int(best[0])
+
+
+@dataclass(frozen=True)
+class GreedyQ:
+    """Greedy actor on a fixed Q-table (known reward): ``act`` never explores."""
+
+    q: np.ndarray
+
+    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int:
+        return greedy_action(self.q[state], allowed)
+
+
+@dataclass(frozen=True)
+class QLearningSettings:
+    """Settings of :class:`RobustQLearner`.
+
+    ``discount`` gamma; ``learning_rate`` alpha of the asynchronous update; ``epsilon`` the
+    probability of a uniformly random allowed action in :meth:`RobustQLearner.act`;
+    ``prior_reward`` the reward assumed for unvisited cells (default 5: optimistic against the
+    case study's rewards 0, -0.5, 5, 20, neutral would be 0).
+    """
+
+    discount: float = 0.95
+    learning_rate: float = 0.5
+    epsilon: float = 0.1
+    prior_reward: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.discount < 1.0:
+            raise QTableError(f"discount must lie in [0, 1), got {self.discount}")
+        if not 0.0 < self.learning_rate <= 1.0:
+            raise QTableError(f"learning_rate must lie in (0, 1], got {self.learning_rate}")
+        if not 0.0 <= self.epsilon <= 1.0:
+            raise QTableError(f"epsilon must lie in [0, 1], got {self.epsilon}")
+        if not np.isfinite(self.prior_reward):
+            raise QTableError(f"prior_reward must be finite, got {self.prior_reward}")
+
+
+class RobustQLearner:
+    """Online robust Q-learning with rewards learned from visits (see the module docstring).
+
+    Args:
+        n_states, n_actions: size of the models it will be used with.
+        n_cells: number of reward cells.
+        state_cell: ``(n_states,)`` cell of each model state (default: identity, then
+            ``n_cells`` must equal ``n_states``).
+        settings: learning settings.
+    """
+
+    def __init__(
+        self,
+        n_states: int,
+        n_actions: int,
+        n_cells: int,
+        *,
+        state_cell: np.ndarray | None = None,
+        settings: QLearningSettings | None = None,
+    ) -> None:
+        if n_states < 1 or n_actions < 1 or n_cells < 1:
+            raise QTableError(f"sizes must be positive, got {n_states}, {n_actions}, {n_cells}")
+        if state_cell is None:
+            if n_cells != n_states:
+                raise QTableError("state_cell is required when n_cells != n_states")
+            state_cell = np.arange(n_states)
+        sc = np.asarray(state_cell)
+        if sc.shape != (n_states,) or sc.dtype.kind not in "iu":
+            raise QTableError(f"state_cell must be an integer array of shape ({n_states},)")
+        if sc.size and (sc.min() < 0 or sc.max() >= n_cells):
+            raise QTableError(f"state_cell values must lie in [0, {n_cells})")
+        self.settings = settings or QLearningSettings()
+        self.state_cell = sc.astype(np.int64)
+        self.n_cells = int(n_cells)
+        self.q = np.zeros((n_states, n_actions))
+        self.reward_sum = np.zeros(n_cells)
+        self.reward_count = np.zeros(n_cells, dtype=np.int64)
+        self._adv: OrderingAdversary | None = None
+
+    @property
+    def n_states(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def n_actions(self) -> int:
+        return self.q.shape[1]
+
+    def cell_reward(self) -> np.ndarray:
+        """Learned reward per cell: the mean observed reward, ``prior_reward`` if unvisited."""
+        seen = self.reward_count > 0
+        mean = self.reward_sum / np.maximum(self.reward_count, 1)
+        return np.where(seen, mean, self.settings.prior_reward)
+
+    def state_reward(self) -> np.ndarray:
+        """Learned reward per model state, ``(n_states,)``."""
+        return self.cell_reward()[self.state_cell]
+
+    def observe_reward(self, state: int, reward: float) -> None:
+        """Record the reward ``reward`` collected on landing in model state ``state``."""
+        if not 0 <= state < self.n_states:
+            raise QTableError(f"state {state} is not in [0, {self.n_states})")
+        if not np.isfinite(reward):
+            raise QTableError(f"reward observed in state {state} is not finite: {reward}")
+        cell = self.state_cell[state]
+        self.reward_sum[cell] += float(reward)
+        self.reward_count[cell] += 1
+
+    def _adversary(self, model: IMDP) -> OrderingAdversary:
+        if model.n_states != self.n_states or model.n_actions != self.n_actions:
+            raise QTableError(
+                f"model has {model.n_states} states and {model.n_actions} actions, the "
+                f"learner {self.n_states} and {self.n_actions}"
+            )
+        if self._adv is None or self._adv.model is not model:
+            self._adv = OrderingAdversary(model, minimize=True)
+        return self._adv
+
+    def _targets(self, model: IMDP, allowed: np.ndarray | None) -> np.ndarray:
+        rows = _allowed_rows(model, allowed)
+        q_rows = np.nan_to_num(self.q[model.row_state, model.row_action], nan=-np.inf)
+        v = _state_values(model, q_rows, rows)
+        w = self.state_reward()
+        return self._adversary(model).expectation(w + self.settings.discount * v)
+
+    def update(
+        self,
+        model: IMDP,
+        state: int,
+        action: int,
+        landed: int,
+        reward: float,
+        *,
+        allowed: np.ndarray | None = None,
+    ) -> float:
+        """One online step: learn ``reward`` of ``landed``, then update ``Q(state, action)``.
+
+        Returns the new ``Q(state, action)``.
+        """
+        self._adversary(model)
+        if not 0 <= state < self.n_states or not 0 <= action < self.n_actions:
+            raise QTableError(f"(state {state}, action {action}) is outside the Q-table")
+        row = int(model.row_index[state, action])
+        if row < 0:
+            raise QTableError(f"action {action} is not enabled in state {state} of the model")
+        self.observe_reward(landed, reward)
+        target = self._targets(model, allowed)[row]
+        a = self.settings.learning_rate
+        self.q[state, action] = (1.0 - a) * self.q[state, action] + a * target
+        return float(self.q[state, action])
+
+    def sweep(
+        self,
+        model: IMDP,
+        *,
+        allowed: np.ndarray | None = None,
+        tolerance: float = 1e-6,
+        max_iterations: int = 10_000,
+    ) -> QSolution:
+        """Robust Q-iteration on the learned rewards, warm-started from the current table."""
+        sol = robust_q_iteration(
+            model,
+            self.state_reward(),
+            discount=self.settings.discount,
+            allowed=allowed,
+            initial=self.q,
+            tolerance=tolerance,
+            max_iterations=max_iterations,
+            adversary=self._adversary(model),
+        )
+        enabled = model.enabled
+        self.q = np.where(enabled, np.nan_to_num(sol.q, nan=0.0), self.q)
+        return sol
+
+    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int:
+        """Epsilon-greedy among ``allowed`` (n_actions,): one uniform draw, then maybe another."""
+        allowed = np.asarray(allowed, dtype=bool)
+        if not allowed.any():
+            raise QTableError(f"no allowed action in state {state}")
+        if rng.random() < self.settings.epsilon:
+            return int(rng.choice(np.flatnonzero(allowed)))
+        return greedy_action(self.q[state], allowed)
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write Q-table, learned rewards and settings to ``path`` (.npz) atomically."""
+        path = Path(path)
+        s = self.settings
+        arrays = {
+            "format": np.array(FORMAT_TAG),
+            "version": np.array(FORMAT_VERSION),
+            "q": self.q,
+            "reward_sum": self.reward_sum,
+            "reward_count": self.reward_count,
+            "state_cell": self.state_cell,
+            "settings": np.array([s.discount, s.learning_rate, s.epsilon, s.prior_reward]),
+        }
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> RobustQLearner:
+        """Read a file written by :meth:`save`; raises :class:`QTableError` naming the file and
+        the field when it is unreadable or inconsistent."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+        except FileNotFoundError:
+            raise
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise QTableError(f"{path}: not a readable Q-table file ({exc})") from exc
+        need = ("format", "version", "q", "reward_sum", "reward_count", "state_cell", "settings")
+        missing = [k for k in need if k not in arrays]
+        if missing:
+            raise QTableError(f"{path}: missing field(s) {missing}")
+        if str(arrays["format"]) != FORMAT_TAG or int(arrays["version"]) != FORMAT_VERSION:
+            raise QTableError(
+                f"{path}: format {arrays['format']!s} version {arrays['version']!s}, expected "
+                f"{FORMAT_TAG} version {FORMAT_VERSION}"
+            )
+        q, rs, rc = arrays["q"], arrays["reward_sum"], arrays["reward_count"]
+        sc, st = arrays["state_cell"], arrays["settings"]
+        if q.ndim != 2 or q.dtype != np.float64 or not np.isfinite(q).all():
+            raise QTableError(f"{path}: field 'q' must be a finite float64 matrix")
+        if rs.ndim != 1 or rc.shape != rs.shape or rc.dtype.kind not in "iu":
+            raise QTableError(f"{path}: fields 'reward_sum'/'reward_count' are inconsistent")
+        if not np.isfinite(rs).all() or (rc < 0).any():
+            raise QTableError(f"{path}: field 'reward_sum' or 'reward_count' has bad values")
+        if st.shape != (4,):
+            raise QTableError(f"{path}: field 'settings' must hold 4 numbers")
+        try:
+            settings = QLearningSettings(*(float(x) for x in st))
+            learner = cls(q.shape[0], q.shape[1], rs.shape[0], state_cell=sc, settings=settings)
+        except QTableError as exc:
+            raise QTableError(f"{path}: {exc}") from exc
+        learner.q = q.copy()
+        learner.reward_sum = rs.astype(np.float64)
+        learner.reward_count = rc.astype(np.int64)
+        return learner

@@ -1,0 +1,80 @@
+import json
+
+import numpy as np
+import pytest
+
+from hopper_sim.cli import main
+from planner.imdp import Problem, ReachAvoid, Specification, solve
+from planner.imdp.grid import GridWorld
+from planner.imdp.io import read_model, write_model
+from planner.imdp.product import ProductIMDP
+from tests.planner.imdp.helpers import corridor_intervals, until_automaton
+from tests.planner.imdp.reference import random_imdp
+
+
+@pytest.fixture
+def model_file(tmp_path):
+    m = random_imdp(np.random.default_rng(9), n_states=15)
+    path = tmp_path / "m.drn"
+    write_model(m, path)
+    return m, path
+
+
+def test_solve_json(model_file, capsys):
+    m, path = model_file
+    assert main(["imdp", "solve", str(path), "--target", "goal", "--avoid", "bad", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {"values", "residual", "iterations"}
+    assert len(out["values"]) == m.n_states and out["residual"] < 1e-8
+    assert (
+        main(
+            [
+                "imdp",
+                "solve",
+                str(path),
+                "--target",
+                "goal",
+                "--avoid",
+                "bad",
+                "--json",
+                "--optimistic",
+            ]
+        )
+        == 0
+    )
+    best = json.loads(capsys.readouterr().out)["values"]
+    assert all(lo <= hi + 1e-12 for lo, hi in zip(out["values"], best, strict=True))
+
+
+def test_export_to_bmdp_and_solve(model_file, tmp_path, capsys):
+    _, path = model_file
+    out = tmp_path / "m.bmdp"
+    assert (
+        main(["imdp", "export", str(path), "--out", str(out), "--to", "bmdp", "--target", "goal"])
+        == 0
+    )
+    assert main(["imdp", "solve", str(out), "--format", "bmdp", "--json"]) == 0
+    via_bmdp = json.loads(capsys.readouterr().out)["values"]
+    assert main(["imdp", "solve", str(path), "--target", "goal", "--json"]) == 0
+    direct = json.loads(capsys.readouterr().out)["values"]
+    assert via_bmdp == pytest.approx(direct, abs=1e-12)
+
+
+def test_errors_go_to_stderr(model_file, capsys):
+    _, path = model_file
+    assert main(["imdp", "solve", str(path)]) == 2
+    assert "--target" in capsys.readouterr().err
+    assert main(["imdp", "solve", str(path), "--target", "nope"]) == 1
+    assert "'nope'" in capsys.readouterr().err
+
+
+def test_product_export_round_trip(tmp_path):
+
+    g = GridWorld(4, 1, labels=[(), ("Haz",), (), ("Goal",)])
+    p = ProductIMDP(g.imdp_from_intervals(*corridor_intervals(g, 0.3)), until_automaton())
+    for name in ("p.tra", "p.drn"):
+        write_model(p.labelled_model(), tmp_path / name)
+        back = read_model(tmp_path / name)
+        v = solve(Problem(back, Specification(ReachAvoid("accept")))).values
+        assert v == pytest.approx(p.satisfaction().values, abs=1e-12)
+        assert back.states_labelled("fail").tolist() == p.failure_states().tolist()

@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from planner.errors import (
+    DuplicateSuccessorError,
+    IndexOutOfRangeError,
+    IntervalBoundsError,
+    MissingRowError,
+    ModelError,
+    RowSumError,
+    UnknownLabelError,
+)
+from planner.imdp import IMDP
+
+
+def two_state(**kw):
+    args = dict(
+        n_states=2,
+        state=[0, 0, 1],
+        action=[0, 0, 0],
+        successor=[0, 1, 1],
+        lower=[0.2, 0.3, 1.0],
+        upper=[0.7, 0.8, 1.0],
+    )
+    args.update(kw)
+    return IMDP(**args)
+
+
+def test_layout_is_sorted_and_indexed():
+    m = IMDP(
+        2,
+        [1, 0, 0, 0],
+        [0, 1, 0, 0],
+        [1, 1, 1, 0],
+        [1, 1, 0.5, 0.5],
+        [1, 1, 0.5, 0.5],
+        labels=[("a",), ()],
+    )
+    assert m.n_rows == 3
+    assert m.row_state.tolist() == [0, 0, 1]
+    assert m.row_action.tolist() == [0, 1, 0]
+    assert m.successor.tolist() == [0, 1, 1, 1]
+    assert m.enabled.tolist() == [[True, True], [True, False]]
+    assert m.row_index[0, 1] == 1 and m.row_index[1, 1] == -1
+    assert m.states_labelled("a").tolist() == [True, False]
+
+
+def test_lower_above_upper():
+    with pytest.raises(IntervalBoundsError, match="state 0, action 0, successor 1"):
+        two_state(lower=[0.2, 0.9, 1.0])
+
+
+def test_bounds_outside_unit_interval():
+    with pytest.raises(IntervalBoundsError, match="not inside"):
+        two_state(upper=[0.7, 1.2, 1.0])
+    with pytest.raises(IntervalBoundsError):
+        two_state(lower=[-0.1, 0.3, 1.0])
+    with pytest.raises(IntervalBoundsError):
+        two_state(upper=[np.nan, 0.8, 1.0])
+
+
+def test_row_not_bracketing_one():
+    with pytest.raises(RowSumError, match="state 0, action 0"):
+        two_state(upper=[0.4, 0.5, 1.0])
+    with pytest.raises(RowSumError, match="sum of lower"):
+        two_state(lower=[0.6, 0.6, 1.0], upper=[0.7, 0.8, 1.0])
+    # within the stated tolerance is accepted
+    two_state(upper=[0.5, 0.5 - 1e-10, 1.0])
+
+
+def test_duplicate_successor():
+    with pytest.raises(DuplicateSuccessorError, match="successor 1"):
+        IMDP(2, [0, 0, 1], [0, 0, 0], [1, 1, 1], [0, 0, 1], [1, 1, 1])
+
+
+def test_unknown_label():
+    with pytest.raises(UnknownLabelError, match="state 1"):
+        two_state(labels=[(), ("goal",)], propositions=("Haz",))
+    m = two_state(labels=[(), ("goal",)])
+    with pytest.raises(UnknownLabelError):
+        m.states_labelled("Haz")
+
+
+def test_index_out_of_range_and_missing_rows():
+    with pytest.raises(IndexOutOfRangeError, match="successor 2"):
+        two_state(successor=[0, 2, 1])
+    with pytest.raises(IndexOutOfRangeError, match="action"):
+        two_state(n_actions=1, action=[0, 0, 1])
+    with pytest.raises(MissingRowError, match="state 2"):
+        two_state(n_states=3)
+    with pytest.raises(IndexOutOfRangeError, match="initial"):
+        two_state(initial=[5])
+    with pytest.raises(ModelError, match="equal length"):
+        two_state(lower=[0.2, 0.3])

@@ -1,0 +1,142 @@
+import numpy as np
+import pytest
+
+from planner.automaton import RabinAutomaton
+from planner.errors import ProductError
+from planner.imdp import IMDP
+from planner.imdp.grid import ACTIONS, GridWorld
+from planner.imdp.product import ProductIMDP
+from tests.planner.imdp.helpers import corridor_intervals, until_automaton
+
+
+def corridor(n=5):
+    labels = [("Haz",)] + [()] * (n - 2) + [("Goal",)]
+    g = GridWorld(n, 1, labels=labels)
+    return g, g.imdp_from_intervals(*corridor_intervals(g), initial=[1])
+
+
+def test_product_structure_and_initial_state():
+    g, m = corridor()
+    p = ProductIMDP(m, until_automaton(), reward=np.arange(m.n_states, dtype=float))
+    assert p.n_states == m.n_states * 3
+    assert p.initial == p.state_index(1, 0)
+    assert p.entry_state(4) == p.state_index(4, 1)  # starting on the goal
+    assert p.step(p.state_index(1, 0), 0) == p.state_index(0, 2)  # entering the hazard
+    assert p.step(p.state_index(1, 0), g.out) == p.state_index(g.out, 2)
+    assert p.reward[p.state_index(3, 2)] == 3.0
+    # E1 from cell 1 at q0: successors cells 1, 2, 3 at q0 with the base intervals
+    r = p.model.row_index[p.state_index(1, 0), ACTIONS.index("E1")]
+    sl = slice(p.model.row_ptr[r], p.model.row_ptr[r + 1])
+    assert p.model.successor[sl].tolist() == [p.state_index(c, 0) for c in (1, 2, 3)]
+    assert p.model.lower[sl].tolist() == [0.0, 0.8, 0.0]
+
+
+def test_failure_nonviolating_and_satisfaction():
+    g, m = corridor()
+    p = ProductIMDP(m, until_automaton())
+    fail = p.failure_states()
+    q = p.automaton_state
+    assert fail[q == 2].all() and not fail[q == 1].any()
+    assert not fail[p.state_index(np.arange(1, 5), 0)].any()
+    sub = p.nonviolating()
+    # at q0 an action is allowed iff its target is not next to the hazard cell 0
+    for c in range(1, 4):
+        s = p.state_index(c, 0)
+        expect = [bool(g.enabled[c, a] and g.target_cell[c, a] >= 2) for a in range(8)]
+        assert sub.actions[s].tolist() == expect
+    sat = p.satisfaction()
+    assert sat.values[p.state_index(np.arange(1, 5), 0)].tolist() == [1.0] * 4
+    assert (sat.values[q == 2] == 0).all() and (sat.values[q == 1] == 1).all()
+    # every accepting component lives at q1
+    assert all((q[ec.states] == 1).all() for ec in p.accepting_end_components())
+    # exploration candidates: end components of the nonviolating sub-model
+    for ec in p.end_components(sub.actions):
+        assert not fail[ec.states].any()
+        assert sub.actions[p.model.row_state[ec.rows], p.model.row_action[ec.rows]].all()
+    # at q0 every allowed hop may spill towards the goal (q1): no end component there
+    assert p.end_components(sub.actions)
+    assert not any((q[ec.states] == 0).any() for ec in p.end_components(sub.actions))
+    strat = p.goal_strategy(allowed=sub.actions)
+    for c in (1, 2, 3):
+        a = strat[p.state_index(c, 0)]
+        assert a >= 0 and sub.actions[p.state_index(c, 0), a]
+
+
+def test_satisfying_submodel_threshold():
+    # 0 start, 1 hazard, 2 free, 3 goal; spill .3 around every target
+    g = GridWorld(4, 1, labels=[(), ("Haz",), (), ("Goal",)])
+    m = g.imdp_from_intervals(*corridor_intervals(g, spill=0.3), initial=[0])
+    p = ProductIMDP(m, until_automaton())
+    sol = p.satisfaction()
+    v = sol.values
+    assert np.all(v <= p.satisfaction(pessimistic=False).values + 1e-12)
+    s0, s2 = p.state_index(0, 0), p.state_index(2, 0)
+    # from 0: E2 aims at 2, the adversary sends .3 into the hazard and .7 to cell 2 (value 1)
+    assert v[s2] == 1.0
+    assert v[s0] == pytest.approx(0.7, abs=1e-12)
+    assert g.enabled[0].tolist() == [False, False, True, True, False, False, False, False]
+    e1, e2, w1, w2 = (ACTIONS.index(x) for x in ("E1", "E2", "W1", "W2"))
+    assert sol.strategy[s0] == e2
+    assert sol.q_values[p.model.row_index[s0, e1]] == pytest.approx(0.0, abs=1e-12)
+    sub = p.satisfying(0.65)
+    assert sub.states[s0] and sub.actions[s0].tolist() == [a == e2 for a in range(8)]
+    # W2 from 2 is worth .3 * 0 + .7 * 0.7 = 0.49 < .65; W1 aims at the hazard
+    assert sub.actions[s2].tolist() == [a == e1 for a in range(8)]
+    assert sol.q_values[p.model.row_index[s2, w2]] == pytest.approx(0.49, abs=1e-12)
+    assert sol.q_values[p.model.row_index[s2, w1]] == pytest.approx(0.0, abs=1e-12)
+    assert not p.satisfying(0.75).states[s0]
+    # the nonviolating sub-model forbids both hops from 0 (each may enter the hazard)
+    assert not p.nonviolating().states[s0]
+
+
+def two_loops():
+    """s0 start; a0 -> loop L (s1 <-> s2, reward 1 and 3), a1 -> loop R (s3 self, reward 5)
+    but a1 reaches R only w.p. in [.5, 1] (else sink s4)."""
+    rows = [
+        (0, 0, [(1, 1, 1)]),
+        (0, 1, [(3, 0.5, 1), (4, 0, 0.5)]),
+        (1, 0, [(2, 1, 1)]),
+        (2, 0, [(1, 1, 1)]),
+        (3, 0, [(3, 1, 1)]),
+        (4, 0, [(4, 1, 1)]),
+    ]
+    s, a, t, lo, up = zip(
+        *[(st, ac, su, l_, u_) for st, ac, es in rows for su, l_, u_ in es], strict=True
+    )
+    return IMDP(5, s, a, t, lo, up, initial=[0])
+
+
+def trivial_automaton():
+    return RabinAutomaton((), np.zeros((1, 1), dtype=int), 0, [({0}, set())])
+
+
+def test_mec_choice_prefers_sure_reach_then_reward():
+    m = two_loops()
+    w = np.array([0.0, 1.0, 3.0, 5.0, 0.0])
+    p = ProductIMDP(m, trivial_automaton(), reward=w)
+    mecs = p.accepting_end_components()
+    assert sorted(ec.states.tolist() for ec in mecs) == [[1, 2], [3], [4]]
+    cands = [ec for ec in mecs if 4 not in ec.states]
+    choice = p.choose_mec(cands)
+    assert choice.component.states.tolist() == [1, 2]
+    assert choice.probability == 1.0 and choice.average_reward == 2.0
+    strat = p.steer_strategy(choice.component)
+    assert strat[0] == 0
+    # from s3 only R is reachable; among the unreachable-for-sure ones keep the best value
+    choice3 = p.choose_mec(cands, state=3)
+    assert choice3.component.states.tolist() == [3]
+    # without the sure loop: the best worst-case probability (0.5) wins over the sink
+    sink = next(ec for ec in mecs if 4 in ec.states)
+    right = next(ec for ec in mecs if 3 in ec.states)
+    c2 = p.choose_mec([sink, right], state=0)
+    assert c2.component is right and c2.probability == pytest.approx(0.5)
+
+
+def test_product_errors():
+    m = two_loops()
+    with pytest.raises(ProductError, match="Goal"):
+        ProductIMDP(m, until_automaton())
+    with pytest.raises(ProductError, match="reward"):
+        ProductIMDP(m, trivial_automaton(), reward=np.zeros(3))
+    with pytest.raises(ProductError, match="no candidate"):
+        ProductIMDP(m, trivial_automaton()).choose_mec([])

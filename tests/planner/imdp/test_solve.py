@@ -1,0 +1,170 @@
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from planner.errors import SpecificationError
+from planner.imdp import (
+    IMDP,
+    DiscountedReward,
+    Problem,
+    ReachAvoid,
+    Specification,
+    ValueIteration,
+    solve,
+)
+from tests.planner.imdp.reference import random_imdp, ref_discounted, ref_reach
+
+
+def reach(m, target, avoid=None, sat="pessimistic", strategy="maximize", **kw):
+    spec = Specification(ReachAvoid(target, avoid), sat, strategy)
+    return solve(Problem(m, spec, **kw), ValueIteration(tolerance=1e-12))
+
+
+def test_self_loop_trap_gives_zero_worst_case():
+    # state 0: one action, [0, 1] to itself and [0, 1] to the goal (state 1)
+    m = IMDP(2, [0, 0, 1], [0, 0, 0], [0, 1, 1], [0, 0, 1], [1, 1, 1], labels=[(), ("g",)])
+    assert reach(m, "g").values.tolist() == [0.0, 1.0]
+    assert reach(m, "g", sat="optimistic").values.tolist() == [1.0, 1.0]
+
+
+def test_geometric_closed_form():
+    # state 0 -> goal [.2,.5], sink [.1,.4], itself [.3,.6]
+    m = IMDP(
+        3,
+        [0, 0, 0, 1, 2],
+        [0] * 5,
+        [0, 1, 2, 1, 2],
+        [0.3, 0.2, 0.1, 1, 1],
+        [0.6, 0.5, 0.4, 1, 1],
+        labels=[(), ("g",), ()],
+    )
+    # worst: p = (goal .2, sink .4, self .4): V = .2 / (1 - .4) = 1/3
+    # best: p = (goal .5, self .4, sink .1): V = .5 / (1 - .4) = 5/6
+    assert reach(m, "g").values[0] == pytest.approx(float(Fraction(1, 3)), abs=1e-10)
+    assert reach(m, "g", sat="optimistic").values[0] == pytest.approx(5 / 6, abs=1e-10)
+    # minimising strategy with the adversary against it (only one action: same numbers)
+    assert reach(m, "g", strategy="minimize").values[0] == pytest.approx(5 / 6, abs=1e-10)
+
+
+def test_choice_between_safe_and_risky_action_and_avoid():
+    # s0: a0 -> goal 1 w.p. [.5,.9], s2 (bad) rest; a1 -> s1 [1,1]; s1 -> goal [.7,.8], s0 rest
+    m = IMDP(
+        4,
+        [0, 0, 0, 1, 1, 2, 3],
+        [0, 0, 1, 0, 0, 0, 0],
+        [3, 2, 1, 3, 0, 2, 3],
+        [0.5, 0.1, 1, 0.7, 0.2, 1, 1],
+        [0.9, 0.5, 1, 0.8, 0.3, 1, 1],
+        labels=[(), (), ("bad",), ("g",)],
+    )
+    sol = reach(m, "g", avoid="bad")
+    # a1 then s1: reaches s1, from s1 goal w.p. >= .7 else back to s0 -> value 1 (a.s.)
+    assert sol.values.tolist() == [1.0, 1.0, 0.0, 1.0]
+    assert sol.strategy[0] == 1
+    # avoiding s1 (label-free) by restricting actions: only a0 at s0
+    allowed = m.enabled.copy()
+    allowed[0, 1] = False
+    sol = reach(m, "g", avoid="bad", allowed=allowed)
+    assert sol.values[0] == pytest.approx(0.5, abs=1e-12)
+    assert sol.strategy[0] == 0
+
+
+def test_discounted_reward_closed_form():
+    # s0 -> s1 [.2,.6], s2 [.4,.8]; s1, s2 absorbing; W(s1) = 10 per landing, gamma = .9
+    m = IMDP(3, [0, 0, 1, 2], [0] * 4, [1, 2, 1, 2], [0.2, 0.4, 1, 1], [0.6, 0.8, 1, 1])
+    w = np.array([0.0, 10.0, 0.0])
+    worst = solve(Problem(m, Specification(DiscountedReward(w, 0.9))), ValueIteration(1e-11))
+    best = solve(
+        Problem(m, Specification(DiscountedReward(w, 0.9), "optimistic")), ValueIteration(1e-11)
+    )
+    # V(s1) = 10 + .9 V(s1) = 100; V(s0) = p1 * (10 + 90) with p1 = .2 or .6
+    assert worst.values == pytest.approx([20.0, 100.0, 0.0], abs=1e-8)
+    assert best.values == pytest.approx([60.0, 100.0, 0.0], abs=1e-8)
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_reach_matches_reference(zero_lower, sat):
+    rng = np.random.default_rng(11 if zero_lower else 12)
+    for _ in range(3):
+        m = random_imdp(rng, n_states=20, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+        got = reach(m, "goal", "bad", sat=sat)
+        ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic")
+        assert got.values == pytest.approx(ref, abs=1e-8)
+        assert got.converged and got.residual < 1e-12
+
+
+def test_without_graph_precomputation_same_values():
+    rng = np.random.default_rng(13)
+    m = random_imdp(rng, n_states=25)
+    spec = Specification(ReachAvoid("goal", "bad"))
+    with_pre = solve(Problem(m, spec), ValueIteration(1e-12))
+    plain = solve(Problem(m, spec), ValueIteration(1e-12, precompute=False))
+    assert plain.values == pytest.approx(with_pre.values, abs=1e-9)
+    assert plain.iterations >= with_pre.iterations
+
+
+def test_min_reach_matches_reference():
+    rng = np.random.default_rng(21)
+    m = random_imdp(rng, n_states=15)
+    tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+    for sat in ("pessimistic", "optimistic"):
+        got = reach(m, "goal", "bad", sat=sat, strategy="minimize")
+        ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=False)
+        assert got.values == pytest.approx(ref, abs=1e-8)
+
+
+def test_invariants_pessimistic_below_optimistic():
+    rng = np.random.default_rng(7)
+    m = random_imdp(rng, n_states=40)
+    lo = reach(m, "goal", "bad")
+    hi = reach(m, "goal", "bad", sat="optimistic")
+    tgt = m.states_labelled("goal")
+    assert np.all(lo.values <= hi.values + 1e-12)
+    assert np.all(lo.values[tgt] == 1.0)
+    assert np.all((lo.values >= 0) & (hi.values <= 1))
+
+
+def test_strategy_achieves_the_values():
+    rng = np.random.default_rng(8)
+    m = random_imdp(rng, n_states=30)
+    sol = reach(m, "goal", "bad")
+    allowed = np.zeros_like(m.enabled)
+    acting = sol.strategy >= 0
+    allowed[np.flatnonzero(acting), sol.strategy[acting]] = True
+    allowed[~acting] = m.enabled[~acting]
+    # fixing the strategy (targets/avoid keep any action: their values are fixed anyway)
+    fixed = reach(m, "goal", "bad", allowed=allowed)
+    assert fixed.values == pytest.approx(sol.values, abs=1e-8)
+
+
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_discounted_matches_reference(sat):
+    rng = np.random.default_rng(31)
+    m = random_imdp(rng, n_states=15)
+    w = rng.normal(size=m.n_states)
+    got = solve(Problem(m, Specification(DiscountedReward(w, 0.8), sat)), ValueIteration(1e-12))
+    ref = ref_discounted(m, w, 0.8, pessimistic=sat == "pessimistic")
+    assert got.values == pytest.approx(ref, abs=1e-8)
+
+
+def test_specification_errors():
+    m = IMDP(1, [0], [0], [0], [1.0], [1.0], labels=[("g",)])
+    with pytest.raises(SpecificationError, match="satisfaction"):
+        Specification(ReachAvoid("g"), "worst")
+    with pytest.raises(SpecificationError, match="strategy"):
+        Specification(ReachAvoid("g"), strategy="argmax")
+    with pytest.raises(SpecificationError, match="discount"):
+        Specification(DiscountedReward(np.zeros(1), 1.0))
+    with pytest.raises(SpecificationError, match="'nope'"):
+        Problem(m, Specification(ReachAvoid("nope")))
+    with pytest.raises(SpecificationError, match="state 3"):
+        Problem(m, Specification(ReachAvoid([3])))
+    with pytest.raises(SpecificationError, match="reward"):
+        Problem(m, Specification(DiscountedReward(np.zeros(2))))
+    with pytest.raises(SpecificationError, match="allowed"):
+        Problem(m, Specification(ReachAvoid("g")), allowed=np.ones((2, 1), bool))
+    with pytest.raises(SpecificationError, match="tolerance"):
+        ValueIteration(tolerance=0)

@@ -1,0 +1,138 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.errors import PolicyError
+from planner.gp import FitSettings, LandingErrorGP
+from planner.imdp import IMDP
+from planner.imdp.grid import GridWorld
+from planner.intervals import TruncatedGaussianNoise
+from planner.learning import ResynthesisSettings, frontier_strategy, resynthesise
+from planner.policy import FALLBACK, GOAL_REACHING, SwitchingPolicy, SwitchingSettings
+from planner.qlearning import QLearningSettings, RobustQLearner
+from tests.planner.conftest import smooth_error
+from tests.planner.imdp.helpers import until_automaton
+
+N = 8
+
+
+def _world() -> tuple[GridWorld, np.ndarray]:
+    labels = np.empty((N, N), dtype=object)
+    for ij in [(3, 3), (3, 4), (4, 3)]:
+        labels[ij] = "Haz"
+    labels[6, 6] = "Goal"
+    w = np.zeros(N * N + 1)
+    w[[1 * N + 5, 2 * N + 5]] = 20.0
+    return GridWorld(N, N, 1.0, labels=labels), w
+
+
+def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch: int = 15):
+    """A simulated run: landing = target centre + 0.6 * smooth_error(departure) + noise."""
+    grid, w = _world()
+    rng = np.random.default_rng(seed)
+    noise = TruncatedGaussianNoise()
+    gp = LandingErrorGP(FitSettings(steps=5, cold_steps=20), seed=seed)
+    settings = ResynthesisSettings(beta=3.0, q_tolerance=1e-4)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02))
+    pos, err = np.zeros((0, 2)), np.zeros((0, 2))
+    xy = np.array([1.5, 1.5])
+    cell = int(grid.locate(xy))
+    ps, r = None, None
+    events = []
+    for step in range(cap):
+        if step % batch == 0:
+            kw = {"reward": w} if learner is None else {"learner": learner}
+            r = resynthesise(
+                gp, grid, until_automaton(), pos, err, initial_cell=cell,
+                current_state=ps, settings=settings, previous=r, **kw,
+            )  # fmt: skip
+            ps = r.product.entry_state(cell) if ps is None else ps
+            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
+        d = policy.decide(ps, rng)
+        target = grid.target_centres[cell, d.action]
+        land = target + 0.6 * smooth_error(xy[None])[0] + noise.sample(rng, 2)
+        pos, err = np.vstack([pos, xy]), np.vstack([err, land - target])
+        nxt = int(grid.locate(land))
+        if learner is not None:
+            nps = r.product.step(ps, nxt)
+            learner.update(r.product.model, ps, d.action, nps, w[nxt])
+        xy, cell, ps = land, nxt, r.product.step(ps, nxt)
+        events.append((d.phase, d.source, d.action, cell))
+        if grid.labels[cell] & {"Haz", "Goal"}:
+            break
+    return events, grid.labels[cell], policy, r
+
+
+def test_simulated_run_reaches_the_goal_safely_and_is_reproducible():
+    events, last, policy, r = _run(0)
+    assert "Goal" in last and "Haz" not in last
+    assert policy.switch_probability is not None and policy.switch_probability > 0.65
+    assert any(e[0] == GOAL_REACHING for e in events)
+    assert set(r.timings) == {"gp_fit", "abstraction", "synthesis"}
+    assert r.intervals.num_states == N * N + 1
+    again, *_ = _run(0)
+    assert again == events
+
+
+def test_unknown_reward_run_learns_rewards_of_visited_cells():
+    _, w = _world()
+    product_states = (N * N + 1) * until_automaton().n_states
+    learner = RobustQLearner(
+        product_states,
+        8,
+        N * N + 1,
+        state_cell=np.arange(product_states) // until_automaton().n_states,
+        settings=QLearningSettings(epsilon=0.2, prior_reward=1.0),
+    )
+    events, *_ = _run(1, learner=learner)
+    visited = np.unique([e[3] for e in events])
+    np.testing.assert_array_equal(learner.cell_reward()[visited], w[visited])
+    assert (learner.reward_count[visited] > 0).all()
+
+
+def test_prior_start_in_a_corner_falls_back():
+    grid, w = _world()
+    gp = LandingErrorGP()
+    r = resynthesise(gp, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)), reward=w)
+    corner = r.product.entry_state(0)
+    assert not r.exploration.allowed[corner].any()  # every hop may leave the world
+    policy = SwitchingPolicy(SwitchingSettings(), r.rl)
+    policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
+    d = policy.decide(corner, np.random.default_rng(0))
+    assert d.phase == FALLBACK and grid.enabled[0, d.action]
+    policy.resynthesise(r.exploration, r.goal, r.satisfaction.values)
+    with pytest.raises(PolicyError, match="no allowed action"):
+        policy.decide(corner, np.random.default_rng(0))
+    with pytest.raises(PolicyError, match="exactly one"):
+        resynthesise(gp, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)))
+
+
+def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
+    # a line 0 - 1 - 2 - 3; action 0 moves right, action 1 moves left; 3 is the target
+    s = np.repeat(np.arange(4), 2)
+    a = np.tile([0, 1], 4)
+    t = np.clip(np.where(a == 0, s + 1, s - 1), 0, 3)
+    model = IMDP(4, s, a, t, np.ones(8), np.ones(8), n_actions=2)
+    allowed = np.ones((4, 2), dtype=bool)
+    allowed[2, 0] = False  # the step into the target is not safe
+    target = np.array([False, False, False, True])
+    strategy = frontier_strategy(model, target, allowed)
+    assert strategy[:3].tolist() == [0, 0, 1]
+    assert (frontier_strategy(model, np.zeros(4, bool), allowed) == -1).all()
+
+
+def test_exploration_candidates_setting():
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    settings = ResynthesisSettings(beta=3.0, candidates="nonviolating")
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=settings)  # fmt: skip
+    assert r.mec is not None
+    assert r.nonviolating.states[r.mec.component.states].all()
+    r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                      initial_cell=9, settings=ResynthesisSettings(beta=3.0))  # fmt: skip
+    assert r2.mec is not None
+    assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
+    with pytest.raises(PolicyError, match="candidates"):
+        ResynthesisSettings(candidates="all")

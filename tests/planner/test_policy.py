@@ -1,0 +1,133 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.errors import PolicyError
+from planner.policy import (
+    EXPLORATION,
+    GOAL_REACHING,
+    LTL,
+    RL,
+    PhasePlan,
+    SwitchingPolicy,
+    SwitchingSettings,
+)
+from planner.qlearning import QLearningSettings, RobustQLearner
+
+N, K = 30, 8
+
+
+def _plan(rng: np.random.Generator, density: float) -> PhasePlan:
+    allowed = rng.random((N, K)) < density
+    allowed[np.arange(N), rng.integers(0, K, N)] = True
+    ltl = np.array([rng.choice(np.flatnonzero(row)) for row in allowed])
+    ltl[rng.random(N) < 0.1] = -1
+    return PhasePlan(allowed, ltl)
+
+
+def _policy(seed: int = 0, **settings) -> tuple[SwitchingPolicy, PhasePlan, PhasePlan]:
+    rng = np.random.default_rng(seed)
+    learner = RobustQLearner(N, K, N, settings=QLearningSettings(epsilon=0.3))
+    learner.q[:] = rng.normal(size=(N, K))
+    policy = SwitchingPolicy(SwitchingSettings(**settings), learner)
+    explore, goal = _plan(rng, 0.6), _plan(rng, 0.3)
+    policy.resynthesise(explore, goal, rng.uniform(0.0, 1.0, N))
+    return policy, explore, goal
+
+
+def test_only_allowed_actions_of_the_current_phase():
+    policy, explore, goal = _policy(p_sat=0.9)
+    rng = np.random.default_rng(1)
+    phases = set()
+    for state in rng.integers(0, N, 600):
+        d = policy.decide(int(state), rng)
+        plan = goal if d.phase == GOAL_REACHING else explore
+        assert plan.allowed[state, d.action]
+        assert d.allowed == tuple(np.flatnonzero(plan.allowed[state]).tolist())
+        if d.source == LTL:
+            assert d.action == plan.ltl_action[state]
+        phases.add(d.phase)
+    assert phases == {EXPLORATION, GOAL_REACHING}
+
+
+def test_switch_when_worst_case_probability_exceeds_p_sat():
+    policy, explore, goal = _policy(p_sat=0.65)
+    sat = np.full(N, 0.3)
+    sat[[2, 3]] = [0.65, 0.7]
+    policy.resynthesise(explore, goal, sat)
+    rng = np.random.default_rng(0)
+    assert policy.decide(0, rng).phase == EXPLORATION
+    assert policy.decide(2, rng).phase == EXPLORATION  # equal is not "exceeds"
+    d = policy.decide(3, rng)
+    assert d.phase == GOAL_REACHING and d.switched and d.phase_step == 0
+    assert policy.switch_step == 2 and policy.switch_probability == pytest.approx(0.7)
+    d = policy.decide(0, rng)  # stays in goal reaching where the probability is low again
+    assert d.phase == GOAL_REACHING and not d.switched and d.phase_step == 1
+    # a re-synthesis that leaves state 5 without goal-reaching actions: back to exploration
+    allowed = goal.allowed.copy()
+    allowed[5] = False
+    ltl = np.where(np.arange(N) == 5, -1, goal.ltl_action)
+    policy.resynthesise(explore, PhasePlan(allowed, ltl), sat)
+    d = policy.decide(5, rng)
+    assert d.phase == EXPLORATION and d.switched
+    policy.reset()
+    assert policy.phase == EXPLORATION and policy.switch_step is None
+
+
+def test_rl_probabilities_follow_the_settings():
+    policy, explore, goal = _policy(p_rl_explore=0.0, c=0.8, eps=0.01, p_sat=0.5)
+    ltl_ok = np.flatnonzero((explore.ltl_action >= 0) & (goal.ltl_action >= 0))
+    policy.resynthesise(explore, goal, np.zeros(N))
+    rng = np.random.default_rng(3)
+    ds = [policy.decide(int(s), rng) for s in rng.choice(ltl_ok, 300)]
+    assert all(d.source == LTL for d in ds)  # P_RL,ee = 0
+    policy.resynthesise(explore, goal, np.ones(N))
+    policy.reset()
+    ds = [policy.decide(int(s), rng) for s in rng.choice(ltl_ok, 400)]
+    m = np.arange(400)
+    np.testing.assert_allclose([d.p_rl for d in ds], 0.8 * np.exp(-0.01 * m))
+    rl_first = np.mean([d.source == RL for d in ds[:100]])
+    rl_last = np.mean([d.source == RL for d in ds[300:]])
+    assert 0.36 < rl_first < 0.66 and rl_last < 0.12  # expected 0.51 and 0.03
+
+
+def test_missing_ltl_action_falls_back_to_rl():
+    policy, explore, _ = _policy(p_rl_explore=0.0, p_sat=1.0)
+    state = int(np.flatnonzero(explore.ltl_action == -1)[0])
+    d = policy.decide(state, np.random.default_rng(0))
+    assert d.source == RL and explore.allowed[state, d.action]
+
+
+def test_same_seed_same_decisions():
+    runs = []
+    for _ in range(2):
+        policy, _, _ = _policy(seed=5, p_sat=0.8)
+        rng = np.random.default_rng(11)
+        runs.append([policy.decide(int(s), rng) for s in rng.integers(0, N, 200)])
+    assert runs[0] == runs[1]
+
+
+def test_bad_plans_and_calls():
+    allowed = np.zeros((3, 2), dtype=bool)
+    allowed[:, 0] = True
+    with pytest.raises(PolicyError, match="state 1: LTL action 1"):
+        PhasePlan(allowed, np.array([0, 1, -1]))
+    with pytest.raises(PolicyError, match="p_rl_explore"):
+        SwitchingSettings(p_rl_explore=1.5)
+    masked = PhasePlan.masked(allowed, np.array([0, 1, 7]))
+    assert masked.ltl_action.tolist() == [0, -1, -1]
+    policy = SwitchingPolicy(SwitchingSettings(), RobustQLearner(3, 2, 3))
+    with pytest.raises(PolicyError, match="before resynthesise"):
+        policy.decide(0, np.random.default_rng(0))
+    with pytest.raises(PolicyError, match="no RL actor"):
+        SwitchingPolicy(SwitchingSettings()).resynthesise(
+            PhasePlan(allowed, np.zeros(3, dtype=int)),
+            PhasePlan(allowed, np.zeros(3, dtype=int)),
+            np.zeros(3),
+        )
+    plan = PhasePlan(allowed, np.array([0, 0, 0]))
+    empty = PhasePlan(np.zeros((3, 2), dtype=bool), np.full(3, -1))
+    policy.resynthesise(empty, plan, np.zeros(3))
+    with pytest.raises(PolicyError, match="state 1 has no allowed action"):
+        policy.decide(1, np.random.default_rng(0))

@@ -1,0 +1,202 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.errors import QTableError
+from planner.imdp import IMDP, DiscountedReward, Problem, Specification, ValueIteration, solve
+from planner.qlearning import (
+    GreedyQ,
+    QLearningSettings,
+    RobustQLearner,
+    greedy_action,
+    robust_q_iteration,
+)
+
+
+def _tiny() -> IMDP:
+    # s0: a0 -> s1 in [0.3, 0.6], s2 in [0.4, 0.7]; a1 -> s2 surely. s1, s2 absorbing.
+    return IMDP(
+        3,
+        state=[0, 0, 0, 1, 2],
+        action=[0, 0, 1, 0, 0],
+        successor=[1, 2, 2, 1, 2],
+        lower=[0.3, 0.4, 1.0, 1.0, 1.0],
+        upper=[0.6, 0.7, 1.0, 1.0, 1.0],
+        n_actions=2,
+    )
+
+
+def test_robust_q_iteration_matches_hand_computation():
+    sol = robust_q_iteration(_tiny(), np.array([0.0, 10.0, 1.0]), discount=0.5, tolerance=1e-12)
+    # V(s1) = 10 / 0.5 = 20, V(s2) = 1 / 0.5 = 2; landing targets W + gamma V: 20 and 2;
+    # the adversary puts its largest share 0.7 on s2: 0.3 * 20 + 0.7 * 2 = 7.4
+    assert sol.converged
+    np.testing.assert_allclose(sol.values, [7.4, 20.0, 2.0], atol=1e-9)
+    np.testing.assert_allclose(sol.q[0], [7.4, 2.0], atol=1e-9)
+    assert np.isnan(sol.q[1, 1])
+    allowed = np.array([[False, True], [True, False], [True, False]])
+    sol = robust_q_iteration(_tiny(), np.array([0.0, 10.0, 1.0]), discount=0.5, allowed=allowed)
+    assert sol.values[0] == pytest.approx(2.0, abs=1e-7)
+
+
+def _random_model(rng: np.random.Generator, n: int = 12, k: int = 3) -> IMDP:
+    rows = []
+    for s in range(n):
+        for a in range(k):
+            succ = rng.choice(n, size=3, replace=False)
+            p = rng.dirichlet(np.ones(3))
+            lo = np.clip(p - rng.uniform(0, 0.2, 3), 0, 1)
+            hi = np.clip(p + rng.uniform(0, 0.2, 3), 0, 1)
+            rows += [(s, a, t, lo_, hi_) for t, lo_, hi_ in zip(succ, lo, hi, strict=True)]
+    s, a, t, lo, hi = (np.array(x) for x in zip(*rows, strict=True))
+    return IMDP(n, s, a, t, lo, hi, n_actions=k)
+
+
+def test_robust_q_iteration_agrees_with_discounted_value_iteration_and_warm_starts():
+    rng = np.random.default_rng(0)
+    model = _random_model(rng)
+    w = rng.normal(size=model.n_states)
+    mine = robust_q_iteration(model, w, discount=0.9, tolerance=1e-10)
+    ref = solve(Problem(model, Specification(DiscountedReward(w, 0.9))), ValueIteration(1e-10))
+    np.testing.assert_allclose(mine.values, ref.values, atol=1e-8)
+    warm = robust_q_iteration(model, w, discount=0.9, tolerance=1e-10, initial=mine.q)
+    assert warm.iterations < 5 < mine.iterations
+    np.testing.assert_allclose(warm.values, mine.values, atol=1e-8)
+
+
+def _ring() -> IMDP:
+    # 3 states in a ring; action 0 moves on, action 1 stays; deterministic
+    s = np.repeat(np.arange(3), 2)
+    a = np.tile([0, 1], 3)
+    t = np.where(a == 0, (s + 1) % 3, s)
+    return IMDP(3, s, a, t, np.ones(6), np.ones(6), n_actions=2)
+
+
+def test_online_q_learning_converges_on_a_deterministic_ring():
+    model = _ring()
+    w = np.array([0.0, 1.0, 3.0])
+    exact = robust_q_iteration(model, w, discount=0.8, tolerance=1e-12)
+    learner = RobustQLearner(
+        3, 2, 3, settings=QLearningSettings(discount=0.8, epsilon=0.3, prior_reward=10.0)
+    )
+    rng = np.random.default_rng(1)
+    s = 0
+    for _ in range(1500):
+        a = learner.act(s, np.ones(2, bool), rng)
+        nxt = int(model.successor[model.row_ptr[model.row_index[s, a]]])
+        learner.update(model, s, a, nxt, w[nxt])
+        s = nxt
+    np.testing.assert_allclose(learner.cell_reward(), w)
+    np.testing.assert_allclose(learner.q, exact.q, atol=1e-3)
+    assert greedy_action(learner.q[1], np.ones(2, bool)) == 0  # move on to the 3-cell
+
+
+def test_unvisited_cells_carry_the_prior_and_sweeps_use_learned_rewards():
+    model = _ring()
+    learner = RobustQLearner(3, 2, 3, settings=QLearningSettings(discount=0.5, prior_reward=2.0))
+    learner.observe_reward(1, 4.0)
+    learner.observe_reward(1, 2.0)
+    np.testing.assert_allclose(learner.cell_reward(), [2.0, 3.0, 2.0])
+    sol = learner.sweep(model, tolerance=1e-12)
+    ref = robust_q_iteration(model, np.array([2.0, 3.0, 2.0]), discount=0.5, tolerance=1e-12)
+    np.testing.assert_allclose(sol.q, ref.q, atol=1e-9)
+    np.testing.assert_allclose(learner.q, ref.q, atol=1e-9)
+
+
+def test_product_states_share_cell_rewards():
+    learner = RobustQLearner(4, 2, 2, state_cell=np.array([0, 1, 0, 1]))
+    learner.observe_reward(2, 7.0)
+    np.testing.assert_allclose(learner.state_reward()[[0, 2]], 7.0)
+
+
+def test_same_seed_same_actions():
+    learner = RobustQLearner(3, 4, 3, settings=QLearningSettings(epsilon=0.5))
+    learner.q[:] = np.arange(12).reshape(3, 4)
+    allowed = np.array([True, False, True, True])
+    runs = [
+        [learner.act(1, allowed, rng) for _ in range(50)]
+        for rng in (np.random.default_rng(9), np.random.default_rng(9))
+    ]
+    assert runs[0] == runs[1]
+    assert set(runs[0]) <= {0, 2, 3} and len(set(runs[0])) > 1
+    assert GreedyQ(learner.q).act(1, allowed, np.random.default_rng(0)) == 3
+
+
+def test_persistence_round_trip(tmp_path):
+    learner = RobustQLearner(
+        4, 2, 2, state_cell=np.array([0, 1, 0, 1]), settings=QLearningSettings(epsilon=0.2)
+    )
+    learner.q[:] = np.random.default_rng(2).normal(size=(4, 2))
+    learner.observe_reward(3, 5.0)
+    path = tmp_path / "q.npz"
+    learner.save(path)
+    learner.save(path)  # overwrite in place
+    assert [p.name for p in tmp_path.iterdir()] == ["q.npz"]
+    back = RobustQLearner.load(path)
+    np.testing.assert_array_equal(back.q, learner.q)
+    np.testing.assert_array_equal(back.cell_reward(), learner.cell_reward())
+    np.testing.assert_array_equal(back.state_cell, learner.state_cell)
+    assert back.settings == learner.settings
+
+
+def _write(path, **arrays):
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+def _valid_arrays():
+    return {
+        "format": np.array("hopnav-robust-q"),
+        "version": np.array(1),
+        "q": np.zeros((2, 2)),
+        "reward_sum": np.zeros(2),
+        "reward_count": np.zeros(2, dtype=np.int64),
+        "state_cell": np.arange(2),
+        "settings": np.array([0.9, 0.5, 0.1, 1.0]),
+    }
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"format": np.array("other")}, "format other"),
+        ({"q": np.array([[0.0, np.nan], [0.0, 0.0]])}, "'q'"),
+        ({"reward_count": np.array([-1, 0])}, "reward_count"),
+        ({"settings": np.array([1.5, 0.5, 0.1, 1.0])}, "discount"),
+        ({"state_cell": np.array([0, 5])}, "state_cell"),
+    ],
+)
+def test_corrupt_files_raise_specific_errors(tmp_path, change, match):
+    path = tmp_path / "bad.npz"
+    _write(path, **(_valid_arrays() | change))
+    with pytest.raises(QTableError, match=match):
+        RobustQLearner.load(path)
+
+
+def test_truncated_and_incomplete_files(tmp_path):
+    good = tmp_path / "good.npz"
+    _write(good, **_valid_arrays())
+    assert RobustQLearner.load(good).q.shape == (2, 2)
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(good.read_bytes()[:100])
+    with pytest.raises(QTableError, match=r"cut\.npz"):
+        RobustQLearner.load(cut)
+    partial = tmp_path / "partial.npz"
+    arrays = _valid_arrays()
+    del arrays["q"]
+    _write(partial, **arrays)
+    with pytest.raises(QTableError, match=r"missing field\(s\) \['q'\]"):
+        RobustQLearner.load(partial)
+
+
+def test_bad_inputs():
+    with pytest.raises(QTableError, match="discount"):
+        QLearningSettings(discount=1.0)
+    learner = RobustQLearner(3, 2, 3)
+    with pytest.raises(QTableError, match="model has 3 states and 3 actions, the learner 3 and 2"):
+        learner.update(_random_model(np.random.default_rng(0), 3, 3), 0, 0, 1, 0.0)
+    with pytest.raises(QTableError, match="not enabled"):
+        RobustQLearner(3, 2, 3).update(_tiny(), 1, 1, 1, 0.0)
+    with pytest.raises(QTableError, match="no allowed action"):
+        learner.act(0, np.zeros(2, bool), np.random.default_rng(0))
