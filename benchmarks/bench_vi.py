@@ -27,13 +27,13 @@ from planner.imdp.grid import GridWorld
 from planner.imdp.product import ProductIMDP
 
 
-def grid_intervals(grid: GridWorld, rng: np.random.Generator):
+def grid_intervals(grid: GridWorld, rng: np.random.Generator, sigma=(0.3, 0.9)):
     """Landing spread around each target: a 3x3 or 5x5 window (by a random sigma per cell),
     lower = 0.8 p, upper = min(1, 1.2 p + 1e-3); mass off the world goes to ``out``."""
     cells, acts = np.nonzero(grid.enabled[: grid.n_cells])
     tgt = grid.target_cell[cells, acts]
     ti, tj = grid.cell_ij(tgt)
-    sigma = rng.uniform(0.3, 0.9, size=grid.n_cells)[cells]
+    sigma = rng.uniform(*sigma, size=grid.n_cells)[cells]
     half = np.where(sigma < 0.55, 1, 2)
     d = np.arange(-2, 3)
     w = np.exp(-0.5 * (d[None, :] / sigma[:, None]) ** 2) * (np.abs(d)[None, :] <= half[:, None])

@@ -6,7 +6,16 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-COMMAND_MODULES: tuple[str, ...] = ("replay", "scenario", "hop", "imdp", "sweep")
+COMMAND_MODULES: tuple[str, ...] = (
+    "replay",
+    "scenario",
+    "hop",
+    "train_controller",
+    "run",
+    "imdp",
+    "automaton",
+    "sweep",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,11 +22,11 @@ import numpy as np
 if TYPE_CHECKING:
     from planner.scenario import Scenario
 
-Phase = Literal["exploration", "goal_reaching"]
+Phase = Literal["exploration", "goal_reaching", "fallback"]
 Source = Literal["LTL", "RL"]
 Outcome = Literal["success", "violation", "timeout"]
 
-PHASES: tuple[str, ...] = ("exploration", "goal_reaching")
+PHASES: tuple[str, ...] = ("exploration", "goal_reaching", "fallback")
 SOURCES: tuple[str, ...] = ("LTL", "RL")
 OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout")
 
@@ -76,7 +76,8 @@ class HopEvent:
     Attributes:
         run_index: the run.
         step: 0-based hop number within the run.
-        phase: ``"exploration"`` or ``"goal_reaching"``.
+        phase: ``"exploration"``, ``"goal_reaching"`` or ``"fallback"`` (no nonviolating
+            action in the current state: the action maximising worst-case satisfaction).
         source: which policy chose the requested action, ``"LTL"`` or ``"RL"``.
         backup: whether the low-level backup switch replaced the requested action.
         requested_action: the action the policy chose (``"N1"``.. ``"W2"``).
@@ -176,7 +177,10 @@ class RunEnd:
         p_switch: worst-case satisfaction probability at the switch, or ``None``.
         backups: number of hops where the backup switch replaced the action.
         seconds: wall-clock duration of the run, s.
-        timings: wall-clock seconds per stage summed over the run.
+        timings: wall-clock seconds per stage summed over the run (``batch_max``: the longest
+            single re-synthesis).
+        reason: what ended the run in words (``"hazard"``, ``"left the map"``,
+            ``"hop failed: ..."``, ``"specification satisfied"``, ``"step cap"``...).
     """
 
     run_index: int
@@ -188,6 +192,7 @@ class RunEnd:
     backups: int
     seconds: float
     timings: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
 
     def __post_init__(self) -> None:
         _check_choice("outcome", self.outcome, OUTCOMES)

@@ -11,11 +11,11 @@ Steps (DESIGN.md "Rewards and policies"), timed separately:
    preferring sure reachability, then the highest worst-case probability, then average
    reward; the strategy steering there within the nonviolating sub-model (exploration's LTL
    action). Where the worst-case probability of reaching it is 0 (early on, when the wide
-   prior intervals let the adversary cut every way), the steering strategy maximises the
-   *best-case* probability instead, so that exploration heads where the goal may be reached
-   and collects data there, while safety still comes from the nonviolating sub-model; where
-   even that is 0 (the goal lies beyond the current safe region), :func:`frontier_strategy`
-   heads for the edge of the safe region nearest to it; the
+   prior intervals let the adversary cut every way), :func:`frontier_strategy` heads for it
+   along the shortest possible paths (``upper > 0`` edges), so that exploration collects data
+   on the way there, while safety still comes from the nonviolating sub-model. (A strategy
+   that merely maximises the best-case probability does not do this: under the prior that
+   probability is 1 almost everywhere, every action ties, and the robot idles.) Then the
    satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
    Q-values on the nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown
    reward: the learner's warm-started sweep on its learned rewards); a fallback plan for
@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import dijkstra
 from planner.automaton import RabinAutomaton
 from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
-from planner.imdp import IMDP, Problem, ReachAvoid, Solution, Specification, graph, solve
+from planner.imdp import IMDP, Solution, graph
 from planner.imdp.graph import SubModel
 from planner.imdp.grid import GridWorld
 from planner.imdp.product import MecChoice, ProductIMDP
@@ -215,10 +215,6 @@ def resynthesise(
         lap("mec_choice")
         steer = product.steer_strategy(mec.component, allowed=nonviolating.actions)
         inside = mec.component.state_mask(pm.n_states)
-        if ((steer < 0) & ~inside).any():
-            spec = Specification(ReachAvoid(inside), satisfaction="optimistic")
-            hopeful = solve(Problem(pm, spec, nonviolating.actions)).strategy
-            steer = np.where((steer < 0) & ~inside, hopeful, steer)
         if ((steer < 0) & ~inside).any():
             frontier = frontier_strategy(pm, inside, nonviolating.actions)
             steer = np.where((steer < 0) & ~inside, frontier, steer)

@@ -6,6 +6,13 @@ maximal probability of ``(!avoid) U target``; worst case unless ``--optimistic``
 
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
+
+``hopnav imdp export --scenario NAME --out PATH [--to F]`` writes a scenario's MT-PIMDP: the
+grid abstraction with the transition intervals of the landing-error GP prior (no data yet, as
+at the start of a run; noise parameters from the MJCF), times the automaton of the scenario's
+formula, with the labels ``accept`` (robustly accepting end components) and ``fail``
+(failure states) added, so that Storm, PRISM or bmdp-tool can check it
+(``--target accept`` for bmdp-tool's terminal states).
 """
 
 from __future__ import annotations
@@ -13,6 +20,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+
+import numpy as np
 
 from planner.errors import PlannerError
 from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
@@ -34,8 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print a JSON object")
     s.set_defaults(func=run_solve)
 
-    e = sub.add_parser("export", help="write a model file in another format")
-    e.add_argument("file")
+    e = sub.add_parser("export", help="write a model file, or a scenario's product, in a format")
+    src = e.add_mutually_exclusive_group(required=True)
+    src.add_argument("file", nargs="?", help="model file to convert")
+    src.add_argument("--scenario", help="shipped scenario name or TOML path: export its product")
     e.add_argument("--out", required=True)
     e.add_argument("--format", choices=FORMATS, help="input format (default: suffix)")
     e.add_argument("--to", choices=FORMATS, help="output format (default: suffix)")
@@ -74,9 +85,33 @@ def run_solve(args: argparse.Namespace) -> int:
     return 0
 
 
+def scenario_product_model(name: str):
+    """The labelled MT-PIMDP of scenario ``name`` under the GP prior (see the module doc)."""
+    from hopper_sim.model import HopperModel
+    from planner.gp.landing import LandingErrorGP
+    from planner.imdp.grid import GridWorld
+    from planner.imdp.product import ProductIMDP
+    from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
+    from planner.ltl.translate import translate
+    from planner.scenario import load_scenario
+
+    sc = load_scenario(name)
+    w = sc.world
+    grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
+    pp = HopperModel.load().perturbation
+    bounds = cell_error_bounds(LandingErrorGP(), grid)
+    ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
+    model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])
+    reward = np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0)
+    return ProductIMDP(model, translate(sc.formula), reward).labelled_model()
+
+
 def run_export(args: argparse.Namespace) -> int:
     try:
-        model = read_model(args.file, args.format)
+        if args.scenario is not None:
+            model = scenario_product_model(args.scenario)
+        else:
+            model = read_model(args.file, args.format)
         terminal = None
         if args.target:
             terminal = model.states_labelled(args.target[0])

@@ -85,11 +85,17 @@ def actions_from_rows(model: IMDP, rows: np.ndarray) -> np.ndarray:
 
 def has_row(model: IMDP, rows: np.ndarray) -> np.ndarray:
     """States with at least one row set in ``rows``."""
-    return np.bincount(model.row_state[rows], minlength=model.n_states) > 0
+    # every state has at least one row (the model validates it)
+    return np.logical_or.reduceat(np.asarray(rows, dtype=bool), model.state_ptr[:-1])
 
 
 def _row_any(model: IMDP, entry_flags: np.ndarray) -> np.ndarray:
-    return np.bincount(model.entry_row[entry_flags], minlength=model.n_rows) > 0
+    # every row has at least one entry (the model validates it), so no segment is empty
+    return np.logical_or.reduceat(entry_flags, model.row_ptr[:-1])
+
+
+def _row_sum(model: IMDP, entry_values: np.ndarray) -> np.ndarray:
+    return np.add.reduceat(entry_values, model.row_ptr[:-1])
 
 
 def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
@@ -111,9 +117,7 @@ def forced_into(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """
     inside = mask[model.successor]
     must = _row_any(model, (model.lower > 0) & inside)
-    outside_up = np.bincount(
-        model.entry_row, weights=np.where(inside, 0.0, model.upper), minlength=model.n_rows
-    )
+    outside_up = _row_sum(model, np.where(inside, 0.0, model.upper))
     touches = _row_any(model, inside & (model.upper > 0))
     return must | (touches & (outside_up < 1.0 - model.tolerance))
 
@@ -126,9 +130,7 @@ def may_stay_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """
     inside = mask[model.successor]
     must_leave = _row_any(model, (model.lower > 0) & ~inside)
-    inside_up = np.bincount(
-        model.entry_row, weights=np.where(inside, model.upper, 0.0), minlength=model.n_rows
-    )
+    inside_up = _row_sum(model, np.where(inside, model.upper, 0.0))
     return ~must_leave & (inside_up >= 1.0 - model.tolerance)
 
 
@@ -224,9 +226,7 @@ def _attractor(
     inside = x[m.successor]
     must = _row_any(m, (m.lower > 0) & inside)
     touches = _row_any(m, inside & (m.upper > 0))
-    outside_up = np.bincount(
-        m.entry_row, weights=np.where(inside, 0.0, m.upper), minlength=m.n_rows
-    )
+    outside_up = _row_sum(m, np.where(inside, 0.0, m.upper))
     limit = 1.0 - m.tolerance
     check = np.flatnonzero(cand_rows & (must | touches))
     while check.size:
@@ -325,9 +325,7 @@ def maximal_end_components(
             ok = ~_row_any(model, (model.upper > 0) & ~same)
         else:
             must_leave = _row_any(model, (model.lower > 0) & ~same)
-            in_up = np.bincount(
-                model.entry_row, weights=np.where(same, model.upper, 0.0), minlength=model.n_rows
-            )
+            in_up = _row_sum(model, np.where(same, model.upper, 0.0))
             ok = ~must_leave & (in_up >= 1.0 - model.tolerance)
         r_new = r & ok
         s_new2 = s_new & has_row(model, r_new)

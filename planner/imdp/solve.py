@@ -14,8 +14,15 @@ Properties:
 
 ``satisfaction="pessimistic"``: the adversary opposes the strategy (the worst case);
 ``"optimistic"``: it helps. The stopping rule is ``max_s |V_k(s) - V_{k-1}(s)| < tolerance``
-(default 1e-8); the last such difference is the reported residual. For discounted reward
-the error is at most ``gamma / (1 - gamma) * residual``.
+(default 1e-8) for a sweep with the exact adversary; that difference is the reported
+residual. For discounted reward the error is at most ``gamma / (1 - gamma) * residual``;
+for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
+
+Reachability sweeps are Gauss-Seidel over layers of graph distance to the value-1 states
+and use :meth:`OrderingAdversary.lower_bound` (no sorting) between order refreshes every
+8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
+fixed point, so zero lower bounds and end components stay safe; the last sweeps use the
+exact order (see ``_reach_sweeps``).
 """
 
 from __future__ import annotations
@@ -24,6 +31,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
@@ -279,45 +288,31 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     def backup(v: np.ndarray) -> np.ndarray:
         return v if reward is None else reward + discount * v
 
-    # Reachability: sweeps use OrderingAdversary.lower_bound (no sorting; the order is
-    # refreshed every `refresh` sweeps). From v <= T(v) the iterates then increase and stay
-    # below the least fixed point. Once the residual is below the tolerance, sweeps use the
-    # exact order until the residual is below the tolerance again (the reported residual).
-    # Discounted reward: exact sweeps that tolerate successors out of order by less than
-    # tolerance / 100.
-    reach = reward is None
     full = OrderingAdversary(
         m,
         adversary_minimizes,
         rows=free_rows,
-        resort_tolerance=0.0 if reach else alg.tolerance * 1e-2,
+        resort_tolerance=0.0 if reward is None else alg.tolerance * 1e-2,
     )
-    refresh = 8
-    v = fixed_val.copy()
-    residual = 0.0
-    it = 0
-    exact = not reach
-    while free_rows.size and it < alg.max_iterations:
-        it += 1
-        bv = backup(v)
-        if exact:
-            q_free = full.expectation(bv)
-        else:
-            if it % refresh == 0:
-                full.update(bv)
-            q_free = full.lower_bound(bv)
-        v_new = v.copy()
-        best = op.reduceat(q_free, seg)
-        v_new[seg_states] = np.maximum(best, v[seg_states]) if reach else best
-        residual = float(np.max(np.abs(v_new - v)))
-        v = v_new
-        if alg.callback is not None:
-            alg.callback(it, residual)
-        if residual < alg.tolerance:
-            if exact and full.resort_tolerance == 0.0:
-                break
-            exact = True
-            full.resort_tolerance = 0.0
+    if reward is None:
+        v, residual, it = _reach_sweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+    else:
+        v, residual, it = fixed_val.copy(), 0.0, 0
+        while free_rows.size and it < alg.max_iterations:
+            # discounted reward: Jacobi sweeps that tolerate successors out of order by
+            # less than tolerance / 100, then exact sweeps until the residual is small
+            it += 1
+            q_free = full.expectation(backup(v))
+            v_new = v.copy()
+            v_new[seg_states] = op.reduceat(q_free, seg)
+            residual = float(np.max(np.abs(v_new - v)))
+            v = v_new
+            if alg.callback is not None:
+                alg.callback(it, residual)
+            if residual < alg.tolerance:
+                if full.resort_tolerance == 0.0:
+                    break
+                full.resort_tolerance = 0.0
     q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
     if isinstance(prop, ReachAvoid) and maximize and pessimistic:
@@ -341,6 +336,95 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         fixed=fixed,
         _q=all_q,
     )
+
+
+def _layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
+    state to ``sources``; ``inf`` where there is no path."""
+    n = m.n_states
+    row_mask = np.zeros(m.n_rows, dtype=bool)
+    row_mask[free_rows] = True
+    rev = graph.state_graph(m, row_mask).T.tocsr()
+    src = np.flatnonzero(sources)
+    ext = sp.bmat(
+        [
+            [rev, sp.csr_matrix((n, 1), dtype=np.int8)],
+            [
+                sp.csr_matrix(
+                    (np.ones(src.size, np.int8), (np.zeros_like(src), src)), shape=(1, n)
+                ),
+                None,
+            ],
+        ],
+        format="csr",
+    )
+    return dijkstra(ext, directed=True, indices=n, unweighted=True)[:n]
+
+
+def _reach_sweeps(
+    m: IMDP,
+    free_rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    maximize: bool,
+    alg: ValueIteration,
+) -> tuple[np.ndarray, float, int]:
+    """Reachability value iteration from below, Gauss-Seidel by distance layers.
+
+    The free states are updated layer by layer in order of their graph distance to the
+    value-1 states (targets, and states of worst-case value 1), each layer with the values
+    just computed for the layers before it, so one sweep carries a value across the whole
+    model. Sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting; the order is
+    refreshed every 8 sweeps); each update is ``max(old, new)``. Starting from
+    ``V_0 <= T(V_0)``, every update stays below the least fixed point and the values only
+    increase, which is what makes zero lower bounds and end components safe. Once a sweep
+    changes no value by ``tolerance`` or more, sweeps use the exact order until one again
+    changes none by that much; that change is the reported residual.
+
+    Returns ``(values, residual, sweeps)``.
+    """
+    v = fixed_val.copy()
+    if free_rows.size == 0:
+        return v, 0.0, 0
+    rs = m.row_state[free_rows]
+    dist = _layers(m, free_rows, fixed_val == 1.0)
+    dist = np.where(np.isfinite(dist), dist, np.inf)
+    row_dist = dist[rs]
+    order = np.argsort(row_dist, kind="stable")  # rows stay sorted by state per layer
+    rd = row_dist[order]
+    cuts = first_of_runs(rd)
+    op = np.maximum if maximize else np.minimum
+    layers = []
+    for k, start in enumerate(cuts):
+        stop = cuts[k + 1] if k + 1 < cuts.size else rd.size
+        lr = free_rows[np.sort(order[start:stop])]
+        lrs = m.row_state[lr]
+        seg = first_of_runs(lrs)
+        layers.append((OrderingAdversary(m, adversary_minimizes, rows=lr), seg, lrs[seg]))
+    refresh = 8
+    residual = 0.0
+    it = 0
+    exact = False
+    while it < alg.max_iterations:
+        it += 1
+        residual = 0.0
+        for adv, seg, states in layers:
+            if exact:
+                q = adv.expectation(v)
+            else:
+                if it % refresh == 0:
+                    adv.update(v)
+                q = adv.lower_bound(v)
+            new = np.maximum(op.reduceat(q, seg), v[states])
+            residual = max(residual, float(np.max(new - v[states])))
+            v[states] = new
+        if alg.callback is not None:
+            alg.callback(it, residual)
+        if residual < alg.tolerance:
+            if exact:
+                break
+            exact = True
+    return v, residual, it
 
 
 def _strategy(

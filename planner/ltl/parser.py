@@ -12,10 +12,11 @@ Grammar (lowest to highest precedence, as in Spot's ``ltlparse.yy``)::
     atoms: true false 1 0, identifiers [A-Za-z_][A-Za-z0-9_.]*, "double-quoted names",
            parenthesised formulas
 
-Identifiers are read by maximal munch: ``Goal`` and ``GFa`` are propositions (Spot reads the
-latter as ``G F a``; write ``G F a`` or ``GF a`` here). An identifier made only of the letters
-``F G X`` (such as ``GF``, ``XX``) is a run of prefix operators. A keyword (``X F G U R V W M
-xor true false``) is never a proposition unless double-quoted.
+Identifiers are read by maximal munch, so ``Goal`` and ``GFa`` are propositions; an
+identifier made only of the letters ``F G X`` (``GF``, ``XX``, ``FG``) is a run of prefix
+operators, so ``GF a`` is ``G F a``. (Spot also reads some glued forms such as ``GFa`` as
+operators; write them with a space here.) A keyword (``X F G U R V W M xor true false``) is
+never a proposition unless double-quoted.
 """
 
 from __future__ import annotations

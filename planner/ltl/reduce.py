@@ -12,7 +12,9 @@
 4. the coarsest bisimulation that respects every state's membership in every ``G_i`` and
    ``B_i`` (Moore's partition refinement, vectorised with numpy), then the quotient;
 5. removal of pairs with empty ``G``, duplicate pairs and pairs dominated by another
-   (``G_i ⊆ G_j`` and ``B_i ⊇ B_j``), and repetition of 2-5 until nothing changes.
+   (``G_i ⊆ G_j`` and ``B_i ⊇ B_j``);
+6. every state on no cycle (visited at most once by any run) is redirected to a state with
+   the same successors, whatever their acceptance marks; 1-6 repeat until nothing changes.
 
 Each step maps a run to a run with the same acceptance, so the language is unchanged.
 """
@@ -105,7 +107,7 @@ def reduce_rabin(
     table = np.asarray(table, dtype=np.int64)
     goods = np.array([g for g, _ in pairs], dtype=bool).reshape(len(pairs), table.shape[0])
     bads = np.array([b for _, b in pairs], dtype=bool).reshape(len(pairs), table.shape[0])
-    names = list(names)
+    origin = np.arange(table.shape[0])  # original index of each current state
     while True:
         # 1. reachable part
         keep = _reachable(table, initial)
@@ -114,7 +116,7 @@ def reduce_rabin(
             table = new_index[table[keep]]
             initial = int(new_index[initial])
             goods, bads = goods[:, keep], bads[:, keep]
-            names = [nm for nm, k in zip(names, keep, strict=True) if k]
+            origin = origin[keep]
         n = table.shape[0]
         # 2. SCC-local clean-up of the pairs
         labels, cyclic = _scc(table)
@@ -167,12 +169,23 @@ def reduce_rabin(
                 for j, (g2, b2) in enumerate(uniq)
             )
         ]
-        changed = n_cls != n or len(kept) != goods.shape[0]
+        # 6. a state on no cycle is visited at most once, so its acceptance marks are
+        # irrelevant: redirect it to a state with the same successors.
+        _, cyc_q = _scc(new_table)
+        owner: dict[bytes, int] = {}
+        for c in np.concatenate([np.flatnonzero(cyc_q), np.flatnonzero(~cyc_q)]).tolist():
+            owner.setdefault(new_table[c].tobytes(), c)
+        redirect = np.arange(n_cls)
+        for c in np.flatnonzero(~cyc_q).tolist():
+            redirect[c] = owner[new_table[c].tobytes()]
+        merged = bool((redirect != np.arange(n_cls)).any())
+        new_table = redirect[new_table]
+        changed = merged or n_cls != n or len(kept) != goods.shape[0]
         table = new_table
-        initial = int(cls[initial])
-        names = [names[r] for r in reps]
+        initial = int(redirect[cls[initial]])
+        origin = origin[reps]
         goods = np.array([g for g, _ in kept], dtype=bool).reshape(len(kept), n_cls)
         bads = np.array([b for _, b in kept], dtype=bool).reshape(len(kept), n_cls)
         if not changed:
             break
-    return table, initial, list(zip(goods, bads, strict=True)), names
+    return table, initial, list(zip(goods, bads, strict=True)), [names[i] for i in origin.tolist()]

@@ -1,30 +1,34 @@
-"""Determinisation of transition-based Büchi automata by Safra trees.
+"""Determinisation of transition-based Büchi automata with compact Safra trees.
 
-Safra's construction ("On the complexity of omega-automata", FOCS 1988), in the
-transition-based form used by Schewe & Varghese ("Tight bounds for the determinisation and
-complementation of generalised Büchi automata", ATVA 2012). A Safra tree is an ordered tree
-of named nodes, each labelled with a non-empty set of NBA states; children's labels are
-disjoint subsets of their parent's, and their union is a proper subset of it. On letter
+Safra's construction ("On the complexity of omega-automata", FOCS 1988) with Piterman's
+compact naming ("From nondeterministic Büchi and Streett automata to deterministic parity
+automata", LMCS 3(3), 2007), in the transition-based form of Schewe & Varghese ("Tight
+bounds for the determinisation and complementation of generalised Büchi automata", ATVA
+2012). A Safra tree is an ordered tree of nodes, each labelled with a non-empty set of NBA
+states; children's labels are disjoint subsets of their parent's, and their union is a
+proper subset of it. Nodes are named ``1..k`` in order of age (older = smaller). On letter
 ``a`` the successor tree is computed by:
 
 1. every node's label ``L`` becomes ``delta(L, a)``, and the node gets a new youngest child
-   (with the smallest unused name) labelled with the states reached from ``L`` through an
-   *accepting* transition, ``delta_acc(L, a)``, if that set is non-empty;
+   labelled with the states reached from ``L`` through an *accepting* transition,
+   ``delta_acc(L, a)``, if that set is non-empty;
 2. horizontal merge: a state that occurs in a node is removed from every younger sibling and
    its descendants;
 3. nodes with empty labels are removed;
 4. vertical merge: a node whose label equals the union of its children's labels loses all
-   its descendants and is *marked*.
+   its descendants and is *marked*;
+5. the surviving nodes are renamed ``1..k'`` preserving their order.
 
-A name is never reused in the step that frees it, so the deterministic automaton's states
-(tree, marked names) carry state-based Rabin acceptance: for every name ``i`` the pair
-``(G_i, B_i)`` with ``G_i`` the states in which ``i`` is marked and ``B_i`` those whose tree
-has no node ``i``. A run is accepted iff some name is eventually always present and marked
-infinitely often.
+With ``e`` the smallest name of an old node removed in the step and ``f`` the smallest name
+of a marked node, the step has priority ``2e - 1`` if ``e < f``, ``2f`` if ``f < e`` and
+``2n + 1`` if neither exists (``n`` NBA states); a run of the NBA's language is one whose
+least priority seen infinitely often is even (some node is eventually never removed nor
+renamed and is marked infinitely often).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 Node = tuple  # (name: int, label: int bitmask over NBA states, children: tuple[Node, ...])
@@ -35,14 +39,33 @@ class SafraResult:
     """The deterministic automaton: ``table[s][a]``, state descriptions and Rabin pairs."""
 
     table: list[list[int]]
-    names: list[str]
+    names: Sequence[str]
     pairs: list[tuple[set[int], set[int]]]
+
+
+def _text(tree: Node | None, marks: int) -> str:
+    if tree is None:
+        return "{}"
+
+    def go(node: Node) -> str:
+        name, label, children = node
+        states = ",".join(str(q) for q in range(label.bit_length()) if label >> q & 1)
+        flag = "!" if marks >> name & 1 else ""
+        inner = "".join(go(c) for c in children)
+        return f"{name}{flag}{{{states}}}" + (f"[{inner}]" if inner else "")
+
+    return go(tree)
 
 
 def determinise(
     n_letters: int, initial: int, succ: list[list[int]], succ_acc: list[list[int]]
 ) -> SafraResult:
-    """Determinise a transition-based Büchi automaton.
+    """Determinise a transition-based Büchi automaton to a state-based Rabin automaton.
+
+    The priority of each step (see the module docstring) is stored in the successor state,
+    so that the condition is state-based: for every even ``2i`` the Rabin pair ``(G, B)``
+    has ``G`` the states entered with priority ``2i`` and ``B`` those entered with a smaller
+    priority ("the least priority seen infinitely often is ``2i``").
 
     Args:
         n_letters: alphabet size.
@@ -68,38 +91,45 @@ def determinise(
         delta_cache[key] = (out, out_acc)
         return out, out_acc
 
-    def names_of(node: Node) -> int:
-        m = 1 << node[0]
-        for c in node[2]:
-            m |= names_of(c)
-        return m
+    n_nba = max(len(succ), 1)
+    top = 2 * n_nba + 1
 
-    def step(tree: Node | None, a: int) -> tuple[Node | None, int]:
+    def count(node: Node) -> int:
+        return 1 + sum(count(c) for c in node[2])
+
+    def step(tree: Node | None, n_old: int, a: int) -> tuple[Node | None, int]:
         if tree is None:
-            return None, 0
-        used = names_of(tree) | 1
-
-        def alloc() -> int:
-            nonlocal used
-            free = ~used & (used + 1)  # lowest zero bit
-            used |= free
-            return free.bit_length() - 1
+            return None, top
+        fresh = n_old
 
         def grow(node: Node) -> Node:
+            nonlocal fresh
             name, label, children = node
             new_label, new_acc = delta(label, a)
             kids = [grow(c) for c in children]
             if new_acc:
-                kids.append((alloc(), new_acc, ()))
+                fresh += 1
+                kids.append((fresh, new_acc, ()))
             return (name, new_label, tuple(kids))
 
-        marks = 0
+        marked = top
+        removed = top
+        survivors: set[int] = set()
+
+        def note_removed(node: Node) -> None:
+            nonlocal removed
+            survivors.discard(node[0])
+            if node[0] <= n_old:
+                removed = min(removed, node[0])
+            for c in node[2]:
+                note_removed(c)
 
         def prune(node: Node, forbidden: int) -> Node | None:
-            nonlocal marks
+            nonlocal marked
             name, label, children = node
             label &= ~forbidden
             if not label:
+                note_removed(node)
                 return None
             kids = []
             covered = 0
@@ -109,54 +139,70 @@ def determinise(
                     kids.append(r)
                     covered |= r[1]
             if kids and covered == label:
-                marks |= 1 << name
-                return (name, label, ())
+                marked = min(marked, name)
+                for k in kids:
+                    note_removed(k)
+                kids = []
+            survivors.add(name)
             return (name, label, tuple(kids))
 
-        # Name 0 is never used, so that bit 0 of ``used`` is always set before alloc.
         result = prune(grow(tree), 0)
-        return result, marks
+        if result is None:
+            return None, 2 * removed - 1 if removed < top else top
+        rank = {name: i + 1 for i, name in enumerate(sorted(survivors))}
 
-    start: tuple[Node | None, int] = ((1, 1 << initial, ()), 0)
+        def rename(node: Node) -> Node:
+            return (rank[node[0]], node[1], tuple(rename(c) for c in node[2]))
+
+        if removed < marked:
+            prio = 2 * removed - 1
+        elif marked < removed:
+            prio = 2 * marked
+        else:
+            prio = top
+        return rename(result), prio
+
+    start: tuple[Node | None, int] = ((1, 1 << initial, ()), top)
     index = {start: 0}
     states = [start]
     table: list[list[int]] = []
     i = 0
+    rows_by_tree: dict[Node | None, list[int]] = {}  # successors depend on the tree only
     while i < len(states):
         tree = states[i][0]
-        row = []
-        for a in range(n_letters):
-            nxt = step(tree, a)
-            j = index.get(nxt)
-            if j is None:
-                j = len(states)
-                index[nxt] = j
-                states.append(nxt)
-            row.append(j)
+        row = rows_by_tree.get(tree)
+        if row is None:
+            row = []
+            n_old = count(tree) if tree is not None else 0
+            for a in range(n_letters):
+                nxt = step(tree, n_old, a)
+                j = index.get(nxt)
+                if j is None:
+                    j = len(states)
+                    index[nxt] = j
+                    states.append(nxt)
+                row.append(j)
+            rows_by_tree[tree] = row
         table.append(row)
         i += 1
-
-    present = [names_of(t) if t is not None else 0 for t, _ in states]
-    max_name = max((p.bit_length() for p in present), default=1)
+    prios = [p for _, p in states]
     pairs = []
-    for name in range(1, max_name):
-        bit = 1 << name
-        good = {s for s, (_, m) in enumerate(states) if m & bit}
-        if good:
-            bad = {s for s in range(len(states)) if not present[s] & bit}
-            pairs.append((good, bad))
-    return SafraResult(table, [_text(t, m) for t, m in states], pairs)
+    for even in sorted({p for p in prios if p % 2 == 0}):
+        good = {s for s, p in enumerate(prios) if p == even}
+        bad = {s for s, p in enumerate(prios) if p < even}
+        pairs.append((good, bad))
+    return SafraResult(table, _Names(states), pairs)
 
 
-def _text(tree: Node | None, marks: int) -> str:
-    if tree is None:
-        return "{}"
+class _Names(Sequence):
+    """State names, rendered only for the states that survive reduction."""
 
-    def go(node: Node) -> str:
-        name, label, children = node
-        states = ",".join(str(q) for q in range(label.bit_length()) if label >> q & 1)
-        flag = "!" if marks >> name & 1 else ""
-        inner = "".join(go(c) for c in children)
-        return f"{name}{flag}{{{states}}}" + (f"[{inner}]" if inner else "")
+    def __init__(self, states: list) -> None:
+        self._states = states
 
-    return go(tree)
+    def __len__(self) -> int:
+        return len(self._states)
+
+    def __getitem__(self, i):
+        tree, prio = self._states[i]
+        return f"{_text(tree, 0)} p{prio}"

@@ -14,6 +14,14 @@ see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 200
   ``G F G f = F G f``;
 * absorption: ``F(f U g) = F g``, ``F(f M g) = F(f & g)``, ``G(f R g) = G g``,
   ``G(f W g) = G(f | g)``;
+* suffix-invariant ``s`` (``G F g``, ``F G g``, and ``& | X F G`` of such): ``X s = F s =
+  G s = s``, ``f U s = f R s = s``, ``s U g = g | (s & F g)``, ``s R g = G g | (s & g)``,
+  ``s W g = s | g``, ``s M g = s & g``, ``f W s = s | G f``, ``f M s = s & F f``;
+* ``f R G g = G g``, ``f M G g = G g & F f``, ``F X f = X F f``, ``G X f = X G f``,
+  ``F(f W g) = F G f | F g``, ``F(f R g) = F G g | F(f & g)``, ``G(f U g) = G(f | g) &
+  G F g``, ``G(f M g) = G g & G F f``;
+* propositional subformulas (no temporal operator, at most 6 propositions) are replaced
+  by a prime-implicant cover of their truth table when that is smaller;
 * distribution: ``X f & X g = X(f & g)``, ``G f & G g = G(f & g)``, ``X f | X g =
   X(f | g)``, ``F f | F g = F(f | g)``.
 """
@@ -22,7 +30,8 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from planner.ltl.syntax import FALSE, TRUE, Formula
+from planner.ltl.boolean import cover
+from planner.ltl.syntax import FALSE, TEMPORAL, TRUE, Formula, ap
 
 COSAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "F", "U", "M"})
 SAFE_OPS = frozenset({"true", "false", "ap", "!", "&", "|", "X", "G", "R", "W"})
@@ -124,15 +133,35 @@ def mk_or(*args: Formula) -> Formula:
     return _finish("|", items, FALSE)
 
 
+def suffix_invariant(f: Formula) -> bool:
+    """Syntactic prefix independence: ``w |= f`` iff ``w^1 |= f`` (``G F g``, ``F G g`` and
+    ``&``, ``|``, ``X``, ``F``, ``G`` of such formulas, and the constants)."""
+    op = f.op
+    if op in ("true", "false"):
+        return True
+    if op in ("F", "G"):
+        c = f.children[0]
+        return c.op == ("G" if op == "F" else "F") or suffix_invariant(c)
+    if op in ("&", "|", "X"):
+        return all(suffix_invariant(c) for c in f.children)
+    return False
+
+
 def mk_X(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE:
+    if suffix_invariant(f):
         return f
     return Formula("X", (f,))
 
 
 def mk_F(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE or f.op == "F":
+    if f.op == "F" or suffix_invariant(f):
         return f
+    if f.op == "X":
+        return mk_X(mk_F(f.children[0]))
+    if f.op == "W":
+        return mk_or(mk_F(mk_G(f.children[0])), mk_F(f.children[1]))
+    if f.op == "R":
+        return mk_or(mk_F(mk_G(f.children[1])), mk_F(mk_and(*f.children)))
     if f.op == "U":
         return mk_F(f.children[1])
     if f.op == "M":
@@ -143,8 +172,14 @@ def mk_F(f: Formula) -> Formula:
 
 
 def mk_G(f: Formula) -> Formula:
-    if f is TRUE or f is FALSE or f.op == "G":
+    if f.op == "G" or suffix_invariant(f):
         return f
+    if f.op == "X":
+        return mk_X(mk_G(f.children[0]))
+    if f.op == "U":
+        return mk_and(mk_G(mk_or(*f.children)), mk_G(mk_F(f.children[1])))
+    if f.op == "M":
+        return mk_and(mk_G(f.children[1]), mk_G(mk_F(f.children[0])))
     if f.op == "R":
         return mk_G(f.children[1])
     if f.op == "W":
@@ -155,16 +190,20 @@ def mk_G(f: Formula) -> Formula:
 
 
 def mk_U(f: Formula, g: Formula) -> Formula:
-    if g is TRUE or g is FALSE or f is FALSE or f is g:
+    if g is TRUE or g is FALSE or f is FALSE or f is g or suffix_invariant(g):
         return g
+    if suffix_invariant(f):
+        return mk_or(g, mk_and(f, mk_F(g)))
     if f is TRUE:
         return mk_F(g)
     return Formula("U", (f, g))
 
 
 def mk_R(f: Formula, g: Formula) -> Formula:
-    if g is TRUE or g is FALSE or f is TRUE or f is g:
+    if g is TRUE or g is FALSE or f is TRUE or f is g or g.op == "G" or suffix_invariant(g):
         return g
+    if suffix_invariant(f):
+        return mk_or(mk_G(g), mk_and(f, g))
     if f is FALSE:
         return mk_G(g)
     return Formula("R", (f, g))
@@ -177,6 +216,10 @@ def mk_W(f: Formula, g: Formula) -> Formula:
         return mk_G(f)
     if f is FALSE or f is g:
         return g
+    if suffix_invariant(f):
+        return mk_or(f, g)
+    if suffix_invariant(g):
+        return mk_or(g, mk_G(f))
     return Formula("W", (f, g))
 
 
@@ -187,6 +230,10 @@ def mk_M(f: Formula, g: Formula) -> Formula:
         return mk_F(f)
     if f is TRUE or f is g:
         return g
+    if suffix_invariant(f):
+        return mk_and(f, g)
+    if suffix_invariant(g) or g.op == "G":
+        return mk_and(g, mk_F(f))
     return Formula("M", (f, g))
 
 
@@ -235,14 +282,77 @@ def _nnf(f: Formula, neg: bool) -> Formula:
     raise ValueError(f"unknown operator {op!r}")
 
 
+def _truth(f: Formula, bits: dict[str, int], full: int) -> int:
+    """Set of letters (bitmask over letters) on which propositional NNF ``f`` holds."""
+    op = f.op
+    if op == "true":
+        return full
+    if op == "false":
+        return 0
+    if op == "ap":
+        return bits[f.name]
+    if op == "!":
+        return full & ~bits[f.children[0].name]
+    vals = [_truth(c, bits, full) for c in f.children]
+    out = full if op == "&" else 0
+    for v in vals:
+        out = out & v if op == "&" else out | v
+    return out
+
+
+@lru_cache(maxsize=100_000)
+def _boolmin(f: Formula) -> Formula:
+    """Replace maximal propositional subformulas by a minimal-ish DNF when that is smaller."""
+    if f.op in ("true", "false", "ap", "!"):
+        return f
+    if all(g.op not in TEMPORAL for g in f.subformulas()):
+        props = sorted(f.propositions())
+        if len(props) <= 6:
+            n_letters = 1 << len(props)
+            bits = {
+                p: sum(1 << x for x in range(n_letters) if x >> i & 1) for i, p in enumerate(props)
+            }
+            table = _truth(f, bits, (1 << n_letters) - 1)
+            letters = [x for x in range(n_letters) if table >> x & 1]
+            terms = []
+            for care, value in cover(letters, len(props)):
+                lits = [
+                    ap(p) if value >> i & 1 else Formula("!", (ap(p),))
+                    for i, p in enumerate(props)
+                    if care >> i & 1
+                ]
+                terms.append(mk_and(*lits))
+            g = mk_or(*terms)
+            return g if g.size < f.size else f
+        return f
+    kids = tuple(_boolmin(c) for c in f.children)
+    if kids == f.children:
+        return f
+    return _rebuild(f.op, kids)
+
+
+def _rebuild(op: str, kids: tuple[Formula, ...]) -> Formula:
+    if op == "&":
+        return mk_and(*kids)
+    if op == "|":
+        return mk_or(*kids)
+    if op == "X":
+        return mk_X(kids[0])
+    if op == "F":
+        return mk_F(kids[0])
+    if op == "G":
+        return mk_G(kids[0])
+    return {"U": mk_U, "R": mk_R, "W": mk_W, "M": mk_M}[op](*kids)
+
+
 def simplify(f: Formula) -> Formula:
     """An equivalent, simplified formula in negation normal form."""
-    return _nnf(f, False)
+    return _boolmin(_nnf(f, False))
 
 
 def negate(f: Formula) -> Formula:
     """The simplified NNF of ``!f``."""
-    return _nnf(f, True)
+    return _boolmin(_nnf(f, True))
 
 
 def is_cosafe(f: Formula) -> bool:

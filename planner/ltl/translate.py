@@ -1,27 +1,34 @@
-"""Translation of LTL formulas to complete deterministic state-based Rabin automata.
+r"""Translation of LTL formulas to complete deterministic state-based Rabin automata.
 
-Pipeline:
+Pipeline (:func:`translate`):
 
 1. :func:`planner.ltl.simplify.simplify`: negation normal form and rewrite rules.
-2. Fast paths (exact, and minimal for their fragment):
+2. Fast paths, by the shape of the simplified formula ``g`` (each exact):
 
-   * *syntactically co-safe* formulas (temporal operators ``X F U M`` only) and
-   * *syntactically safe* formulas (``X G R W`` only)
+   * ``g`` *syntactically co-safe* (temporal operators ``X F U M`` only) or *safe* (``X G R
+     W`` only): the DFA whose states are the formulas reached by progression
+     (:mod:`planner.ltl.progression`; Esparza, Křetínský & Sickert, LICS 2018), minimised.
+     A co-safe formula holds iff progression reaches ``true`` (pair ``({true}, {})``), a
+     safe one iff it never reaches ``false`` (pair ``(S \ {false}, {false})``).
+     ``!Haz U Goal`` gives 3 states.
+   * ``g = g_1 & ... & g_k`` or ``g_1 | ... | g_k`` (also ``G(g_1 & ..)``, ``F(g_1 | ..)``):
+     the co-safe operands, and the safe ones, are grouped into one formula each; the
+     operands are translated recursively and combined by synchronous products
+     (:mod:`planner.ltl.compose`).
+   * ``g = X h``: the automaton of ``h`` behind a fresh initial state.
+   * ``G F h`` / ``F G h`` with ``F h`` co-safe / ``G h`` safe: restart monitors (a
+     deterministic Büchi / co-Büchi automaton).
+   * ``G h`` with ``h`` co-safe / ``F h`` with ``h`` safe: breakpoint construction on
+     progressed formulas (Miyano & Hayashi 1984), a deterministic Büchi / co-Büchi automaton.
 
-   are translated to a DFA whose states are the formulas reached by progression
-   (:mod:`planner.ltl.progression`), minimised (Moore). A co-safe formula holds iff the
-   progression reaches ``true`` (one pair ``({true}, {})``); a safe formula iff it never
-   reaches ``false`` (one pair ``(S \\ {false}, {false})``). ``!Haz U Goal`` gives 3 states.
 3. Every other formula: tableau to a transition-based generalised Büchi automaton
-   (Gerth-Peled-Vardi-Wolper 1995 / Couvreur 1999, :mod:`planner.ltl.tableau`), counter
-   degeneralisation to a transition-based Büchi automaton, removal of states with an empty
-   language, Safra's determinisation to state-based Rabin acceptance (Safra 1988,
-   :mod:`planner.ltl.safra`). If the formula's negation is co-safe or safe, or if its
-   determinised negation is smaller, the translator also builds the automaton of ``!f``
-   from its DFA only when the complement stays Rabin-expressible as one pair (complement of
-   a co-safe DFA is a safety automaton and vice versa).
-4. :func:`planner.ltl.reduce.reduce_rabin`: reachable part, SCC-local acceptance clean-up,
-   merge of empty-language states, bisimulation quotient, pair clean-up.
+   (Gerth, Peled, Vardi & Wolper 1995; Couvreur 1999; :mod:`planner.ltl.tableau`),
+   SCC-aware counter degeneralisation to a transition-based Büchi automaton, removal of NBA
+   states with an empty language, then Safra's determinisation with Piterman's compact
+   trees to a parity condition made state-based Rabin (:mod:`planner.ltl.safra`).
+4. After every construction, :func:`planner.ltl.reduce.reduce_rabin`: reachable part,
+   SCC-local acceptance clean-up, merge of empty-language states, bisimulation quotient,
+   pair clean-up.
 """
 
 from __future__ import annotations
@@ -29,14 +36,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import AutomatonError
+from planner.ltl.compose import delay, product
 from planner.ltl.parser import parse
-from planner.ltl.progression import FF, TT, Progression, explore
+from planner.ltl.progression import FF, TT, Progression, dnf_and, explore
 from planner.ltl.reduce import reduce_rabin
 from planner.ltl.safra import determinise
-from planner.ltl.simplify import is_cosafe, is_safe, simplify
+from planner.ltl.simplify import is_cosafe, is_safe, mk_and, mk_F, mk_G, mk_or, negate, simplify
 from planner.ltl.syntax import Formula
 from planner.ltl.tableau import build_tgba
 
@@ -70,24 +80,48 @@ def _safra(f: Formula, props: tuple[str, ...]):
     tgba = build_tgba(f, props)
     n_letters = 1 << len(props)
     k = tgba.n_acc
-    levels = max(k, 1)
-    full = (1 << k) - 1
-    # Degeneralisation: state (q, level); an edge is accepting when it completes a round.
-    n = len(tgba.states) * levels
+    # SCC-aware degeneralisation: inside each SCC of the TGBA the round-robin counter only
+    # visits the acceptance sets that some inner edge misses; edges between SCCs reset it.
+    n_q = len(tgba.states)
+    src = [q for q, edges in enumerate(tgba.edges) for _ in edges]
+    dst = [t for edges in tgba.edges for _, t, _ in edges]
+    graph = csr_matrix(
+        (
+            np.ones(len(src), dtype=np.int8),
+            (np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)),
+        ),
+        shape=(n_q, n_q),
+    )
+    _, scc = connected_components(graph, directed=True, connection="strong")
+    scc = scc.tolist()
+    inner_all = {}
+    for q, edges in enumerate(tgba.edges):
+        for _, t, acc in edges:
+            if scc[q] == scc[t]:
+                inner_all[scc[q]] = inner_all.get(scc[q], (1 << k) - 1) & acc
+    relevant = {c: [j for j in range(k) if not m >> j & 1] for c, m in inner_all.items()}
+    offset = []
+    n = 0
+    for q in range(n_q):
+        offset.append(n)
+        n += max(1, len(relevant.get(scc[q], [])))
     succ = [[0] * n_letters for _ in range(n)]
     succ_acc = [[0] * n_letters for _ in range(n)]
     for q, edges in enumerate(tgba.edges):
-        for lvl in range(levels):
-            src = q * levels + lvl
-            row, row_acc = succ[src], succ_acc[src]
+        rel = relevant.get(scc[q], [])
+        for lvl in range(max(1, len(rel))):
+            row, row_acc = succ[offset[q] + lvl], succ_acc[offset[q] + lvl]
             for letters, target, acc in edges:
-                j = lvl
-                while j < k and acc >> j & 1:
-                    j += 1
-                accepting = j >= k or acc == full
-                if j >= k:
-                    j = 0
-                bit = 1 << (target * levels + j)
+                if scc[target] != scc[q]:
+                    j, accepting = 0, False
+                else:
+                    j = lvl
+                    while j < len(rel) and acc >> rel[j] & 1:
+                        j += 1
+                    accepting = j >= len(rel)
+                    if accepting:
+                        j = 0
+                bit = 1 << (offset[target] + j)
                 rest = letters
                 while rest:
                     low = rest & -rest
@@ -114,9 +148,6 @@ def _safra(f: Formula, props: tuple[str, ...]):
 
 
 def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
     src, dst, acc_src, acc_dst = [], [], [], []
     for q in range(n):
         for a in range(n_letters):
@@ -146,6 +177,145 @@ def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
         reached = new
 
 
+def _monitor(f: Formula, props: tuple[str, ...], recurrence: bool):
+    """Restart monitors: ``G F h`` (``F h`` co-safe) as a deterministic Büchi automaton and
+    ``F G h`` (``G h`` safe) as a deterministic co-Büchi automaton.
+
+    The monitor progresses ``m = F h`` (resp. ``G h``); when the progression reaches
+    ``true`` (resp. ``false``) it restarts from ``m`` in a state flagged good (resp. bad).
+    ``G F h`` holds iff ``F h`` is discharged infinitely often; ``F G h`` iff ``G h`` fails
+    finitely often.
+    """
+    prog = Progression(props)
+    start_dnf = prog.dnf(f)
+    done = TT if recurrence else FF
+    start = (start_dnf, False)
+    index = {start: 0}
+    keys = [start]
+    rows = []
+    i = 0
+    while i < len(keys):
+        row = []
+        for a in range(1 << len(props)):
+            nxt = prog.af(keys[i][0], a)
+            key = (start_dnf, True) if nxt == done else (nxt, False)
+            j = index.get(key)
+            if j is None:
+                j = len(keys)
+                index[key] = j
+                keys.append(key)
+            row.append(j)
+        rows.append(row)
+        i += 1
+    flag = np.array([k[1] for k in keys])
+    pair = (flag, np.zeros_like(flag)) if recurrence else (np.ones_like(flag), flag)
+    names = [prog.text(d) + (" !" if fl else "") for d, fl in keys]
+    return np.array(rows, dtype=np.int64), 0, [pair], names
+
+
+def _breakpoint(psi: Formula, props: tuple[str, ...], complement: bool):
+    """``G psi`` for co-safe ``psi`` as a deterministic Büchi automaton (or, with
+    ``complement``, its complement ``F !psi`` as a deterministic co-Büchi automaton).
+
+    Breakpoint construction (Miyano & Hayashi, TCS 32, 1984) on progressed formulas: a state
+    ``(X, Y)`` holds ``X``, the conjunction of the obligations ``psi`` started since the
+    previous breakpoint and before the current batch, progressed so far, and ``Y``, those
+    of the current batch. Reading ``a``: ``X' = af(X, a)``, ``Y' = af(Y, a) & psi``. If
+    either becomes ``false`` an obligation failed (rejecting sink). If ``X'`` is ``true``,
+    the batch is discharged: the next state is ``(Y', true)`` and is flagged. Each batch is
+    finite and every co-safe obligation that holds is discharged after finitely many
+    letters, so ``G psi`` holds iff flagged states recur.
+    """
+    prog = Progression(props)
+    d_psi = prog.dnf(psi)
+    start = (d_psi, TT, False)
+    sink = (FF, FF, False)
+    index = {start: 0}
+    keys = [start]
+    rows = []
+    i = 0
+    while i < len(keys):
+        x, y, _ = keys[i]
+        row = []
+        for a in range(1 << len(props)):
+            if x == FF:
+                key = sink
+            else:
+                x1 = prog.af(x, a)
+                y1 = dnf_and(prog.af(y, a), d_psi)
+                if x1 == FF or y1 == FF:
+                    key = sink
+                elif x1 == TT:
+                    key = (y1, TT, True)
+                else:
+                    key = (x1, y1, False)
+            j = index.get(key)
+            if j is None:
+                j = len(keys)
+                index[key] = j
+                keys.append(key)
+            row.append(j)
+        rows.append(row)
+        i += 1
+    flag = np.array([k[2] for k in keys])
+    pair = (np.ones_like(flag), flag) if complement else (flag, np.zeros_like(flag))
+    names = [f"[{prog.text(x)}] [{prog.text(y)}]" + (" !" if f else "") for x, y, f in keys]
+    return np.array(rows, dtype=np.int64), 0, [pair], names
+
+
+def _translate(g: Formula, own: tuple[str, ...]):
+    """Reduced raw automaton of NNF formula ``g`` over ``own`` (see the module docstring)."""
+    if is_cosafe(g):
+        return reduce_rabin(*_progression_dfa(g, own, cosafe=True))
+    if is_safe(g):
+        return reduce_rabin(*_progression_dfa(g, own, cosafe=False))
+    op = g.op
+    parts = None
+    conj = op == "&"
+    if op in ("&", "|"):
+        parts = list(g.children)
+    elif op == "G" and g.children[0].op == "&":
+        parts, conj = [mk_G(c) for c in g.children[0].children], True
+    elif op == "F" and g.children[0].op == "|":
+        parts, conj = [mk_F(c) for c in g.children[0].children], False
+    if parts is not None:
+        # Group the co-safe and the safe operands: each group is one (DFA) operand.
+        groups = {"cosafe": [], "safe": [], "other": []}
+        for c in parts:
+            kind = "cosafe" if is_cosafe(c) else "safe" if is_safe(c) else "other"
+            groups[kind].append(c)
+        mk = mk_and if conj else mk_or
+        operands = [mk(*groups[k]) for k in ("cosafe", "safe") if groups[k]] + groups["other"]
+        if len(operands) > 1:
+            raws = [_translate(c, own) for c in operands]
+            result = _product_reduced(raws, conj)
+            if result is not None:
+                return result
+    if op == "X":
+        return reduce_rabin(*delay(_translate(g.children[0], own)))
+    if op == "G" and g.children[0].op == "F" and is_cosafe(g.children[0]):
+        return reduce_rabin(*_monitor(g.children[0], own, recurrence=True))
+    if op == "F" and g.children[0].op == "G" and is_safe(g.children[0]):
+        return reduce_rabin(*_monitor(g.children[0], own, recurrence=False))
+    if op == "G" and is_cosafe(g.children[0]):
+        return reduce_rabin(*_breakpoint(g.children[0], own, complement=False))
+    if op == "F" and is_safe(g.children[0]):
+        return reduce_rabin(*_breakpoint(negate(g.children[0]), own, complement=True))
+    return reduce_rabin(*_safra(g, own))
+
+
+def _product_reduced(raws, conj: bool):
+    """Pairwise products, reducing after each; ``None`` if a product is refused."""
+    raws = sorted(raws, key=lambda r: r[0].shape[0])
+    acc = raws[0]
+    for r in raws[1:]:
+        p = product([acc, r], conj)
+        if p is None:
+            return None
+        acc = reduce_rabin(*p)
+    return acc
+
+
 def _expand_alphabet(table: np.ndarray, own: tuple[str, ...], props: tuple[str, ...]):
     """Re-index letters from the formula's own propositions to the full alphabet."""
     if own == props:
@@ -173,13 +343,7 @@ def translate(formula: str | Formula, propositions: Sequence[str] | None = None)
     props = _alphabet(f, propositions)
     g = simplify(f)
     own = tuple(p for p in props if p in g.propositions())
-    if is_cosafe(g):
-        raw = _progression_dfa(g, own, cosafe=True)
-    elif is_safe(g):
-        raw = _progression_dfa(g, own, cosafe=False)
-    else:
-        raw = _safra(g, own)
-    table, initial, pairs, names = reduce_rabin(*raw)
+    table, initial, pairs, names = _translate(g, own)
     table = _expand_alphabet(table, own, props)
     return RabinAutomaton(
         props,

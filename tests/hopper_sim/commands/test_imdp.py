@@ -78,3 +78,17 @@ def test_product_export_round_trip(tmp_path):
         v = solve(Problem(back, Specification(ReachAvoid("accept")))).values
         assert v == pytest.approx(p.satisfaction().values, abs=1e-12)
         assert back.states_labelled("fail").tolist() == p.failure_states().tolist()
+
+
+def test_export_scenario_product(tmp_path, capsys):
+    out = tmp_path / "a.drn"
+    assert main(["imdp", "export", "--scenario", "a", "--out", str(out)]) == 0
+    model = read_model(out)
+    # 15 x 15 cells + out, times the 3-state automaton of !Haz U Goal
+    assert model.n_states == 226 * 3
+    assert "accept" in model.propositions and "fail" in model.propositions
+    assert main(["imdp", "solve", str(out), "--target", "accept", "--avoid", "fail", "--json"]) == 0
+    values = json.loads(capsys.readouterr().out)["values"]
+    acc = model.states_labelled("accept")
+    assert all(values[s] == 1.0 for s in np.flatnonzero(acc))
+    assert all(values[s] == 0.0 for s in np.flatnonzero(model.states_labelled("fail")))

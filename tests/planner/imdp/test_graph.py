@@ -1,5 +1,7 @@
 import numpy as np
+import pytest
 
+from planner.errors import SpecificationError
 from planner.imdp import IMDP, graph
 
 
@@ -110,3 +112,13 @@ def test_possible_and_positive_reach():
     pos, _ = graph.robust_positive_reach(m, tgt)
     assert pos.tolist() == [False, True, False]
     assert graph.possible_reach(m, tgt, avoid=mask(3, [0])).tolist() == [False, True, False]
+
+
+def test_graph_argument_errors():
+    m = model(1, [(0, 0, [(0, 1, 1)])])
+    with pytest.raises(SpecificationError, match="mode"):
+        graph.maximal_end_components(m, mode="robust")
+    with pytest.raises(SpecificationError, match="row mask"):
+        graph.stays_in(m, np.ones(1, bool)) & graph._all_rows(m, np.ones(3, bool))
+    with pytest.raises(SpecificationError, match="action mask"):
+        graph.rows_from_actions(m, np.ones((2, 1), bool))

@@ -26,6 +26,9 @@ def test_self_loop_trap_gives_zero_worst_case():
     m = IMDP(2, [0, 0, 1], [0, 0, 0], [0, 1, 1], [0, 0, 1], [1, 1, 1], labels=[(), ("g",)])
     assert reach(m, "g").values.tolist() == [0.0, 1.0]
     assert reach(m, "g", sat="optimistic").values.tolist() == [1.0, 1.0]
+    # value iteration alone (no graph precomputation) stays at the least fixed point
+    plain = ValueIteration(1e-12, precompute=False)
+    assert solve(Problem(m, Specification(ReachAvoid("g"))), plain).values.tolist() == [0, 1]
 
 
 def test_geometric_closed_form():

@@ -9,7 +9,7 @@ it has not been run on this machine, where stormpy is not installed.
 import numpy as np
 import pytest
 
-from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
+from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteration, solve
 from planner.imdp.io import write_drn
 from tests.planner.imdp.reference import random_imdp
 
@@ -21,8 +21,6 @@ def test_values_agree_with_storm(tmp_path, sat):
     m = random_imdp(np.random.default_rng(41), n_states=30, zero_lower=False)
     lower = np.maximum(m.lower, 1e-3)  # all lower bounds positive
     s, a, t, _, up = m.coo()
-    from planner.imdp import IMDP
-
     m = IMDP(
         m.n_states,
         s,

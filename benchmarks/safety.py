@@ -1,0 +1,70 @@
+"""Safety and guarantee check (issue "learning"): many runs of case (a) with a known reward.
+
+Usage: python benchmarks/safety.py [--runs 50] [--workers 2] [--scenario a] [--seed 0]
+
+Acceptance: no run enters a hazard or leaves the map, and the success rate is at least the
+worst-case satisfaction probability reported at the switch to goal reaching (>= P_sat).
+Prints per-run outcomes, the violation count, the success rate with its 95 % Wilson interval,
+and the mean and minimum p_switch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+from tqdm import tqdm
+
+from hopper_sim.runner import run_single
+from planner.scenario import load_scenario
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default="a")
+    ap.add_argument("--runs", type=int, default=50)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    sc = load_scenario(args.scenario)
+    seeds = [args.seed + k for k in range(args.runs)]
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:
+        futures = [pool.submit(run_single, sc, s, k) for k, s in enumerate(seeds)]
+        ends = [f.result() for f in tqdm(futures, unit="run")]
+    wall = time.perf_counter() - t0
+    for e in ends:
+        print(
+            f"run {e.run_index:3d}: {e.outcome:9s} {e.reason:28s} steps {e.steps:4d} "
+            f"reward {e.reward:7.1f} switch {e.switch_step} p_switch "
+            f"{'-' if e.p_switch is None else f'{e.p_switch:.3f}'} {e.seconds:.1f} s"
+        )
+    n = len(ends)
+    outcomes = [e.outcome for e in ends]
+    hazard = sum(e.reason in ("hazard", "left the map") for e in ends)
+    fell = sum(e.reason.startswith("hop failed") for e in ends)
+    succ = outcomes.count("success")
+    lo, hi = wilson(succ, n)
+    p_sw = np.array([e.p_switch for e in ends if e.p_switch is not None])
+    print(f"\n{n} runs in {wall:.0f} s wall ({np.mean([e.seconds for e in ends]):.1f} s per run)")
+    print(f"hazard or off-map: {hazard}  (target 0)   hop failures: {fell}")
+    print(f"success {succ}/{n} = {succ / n:.3f} (95 % Wilson [{lo:.3f}, {hi:.3f}])")
+    if p_sw.size:
+        print(f"p_switch: mean {p_sw.mean():.3f}, min {p_sw.min():.3f} over {p_sw.size} switches")
+        verdict = "holds" if succ / n >= p_sw.max() else "does NOT hold"
+        print(f"success rate >= every reported p_switch: {verdict}")
+    else:
+        print("no run switched to goal reaching")
+
+
+if __name__ == "__main__":
+    main()

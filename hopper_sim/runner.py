@@ -1,0 +1,335 @@
+"""The navigation loop: plan on the learned interval abstraction, hop in MuJoCo, learn, repeat.
+
+One run (the paper's "Synthesis Approach", DESIGN.md "Rewards and policies"):
+
+1. The landing-error GPs start empty (their prior alone sets wide intervals); the grid IMDP,
+   the MT-PIMDP with the automaton of the scenario's formula and the reward, and the policies
+   are synthesised (:func:`planner.learning.resynthesise`).
+2. Every hop, the :class:`~planner.policy.SwitchingPolicy` picks an action in the current
+   product state (exploration towards the chosen MEC or goal reaching, LTL or RL, only among
+   the allowed actions of the nonviolating or satisfying sub-model); the environment
+   (:class:`~hopper_sim.environment.HopperGridEnv`) turns it into touchdown angles (with the
+   controller's backup switch among the same allowed actions) and hops in MuJoCo with the
+   terrain field, noise and thrust; the departure position and the landing error
+   ``landing - target`` are recorded; the automaton reads the label of the cell landed in.
+3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
+   abstraction and policies re-synthesised.
+4. The run ends in success when the automaton reaches an accepting sink (for ``!Haz U Goal``:
+   the goal), in violation on a hazard cell, off the map, in a rejecting automaton sink, or
+   when a hop fails (the hopper fell), and in a timeout at ``max_steps`` hops.
+
+With an unknown reward (``reward_known = false``) a :class:`~planner.qlearning.RobustQLearner`
+learns the reward from visits and updates its Q-values online; it persists across the runs of
+:meth:`NavigationRunner.run_many` (and can be saved and loaded), while the GP data is reset at
+every run, as in the paper.
+
+The runner never prints or plots: it calls an observer (:mod:`hopper_sim.events`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
+from planner.automaton import RabinAutomaton
+from planner.gp.landing import FitSettings, LandingErrorGP
+from planner.imdp.grid import ACTIONS
+from planner.intervals import TruncatedGaussianNoise
+from planner.learning import Resynthesis, ResynthesisSettings, resynthesise
+from planner.ltl.translate import translate
+from planner.policy import SwitchingPolicy, SwitchingSettings
+from planner.qlearning import QLearningSettings, RobustQLearner
+from planner.scenario import Scenario
+from planner.torch_threads import torch_threads
+
+
+@dataclass(frozen=True)
+class RunnerSettings:
+    """Settings of the loop that the scenario does not hold.
+
+    Attributes:
+        env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
+        delta: the interval confidence parameter (intervals hold with probability >= 1 -
+            delta under the GP model, see :mod:`planner.intervals`).
+        samples_per_axis: sample points per cell and axis for the per-cell error bounds.
+        gp: GP fitting settings.
+        map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
+        q_learning: online Q-learning settings for an unknown reward (its discount is the
+            scenario's).
+        torch_threads: torch intra-op threads during a run (the controller's and the GPs'
+            small batches run fastest on one thread; restored after the run).
+    """
+
+    env: EnvSettings = field(default_factory=EnvSettings)
+    delta: float = 0.01
+    samples_per_axis: int = 5
+    gp: FitSettings | None = None
+    map_resolution: int = 2
+    q_learning: QLearningSettings | None = None
+    torch_threads: int = 1
+
+
+def automaton_sinks(automaton: RabinAutomaton) -> tuple[np.ndarray, np.ndarray]:
+    """Boolean masks of the accepting and the rejecting sinks of ``automaton`` (states whose
+    every transition loops; accepting iff the run staying there satisfies some Rabin pair)."""
+    table = automaton.transitions
+    sink = (table == np.arange(automaton.n_states)[:, None]).all(axis=1)
+    accepting = np.array(
+        [bool(sink[q]) and automaton.is_accepting_cycle({q}) for q in automaton.states]
+    )
+    return accepting, sink & ~accepting
+
+
+class NavigationRunner:
+    """Runs navigation episodes of a scenario (see the module docstring).
+
+    Args:
+        scenario: the world, tasks and runner parameters.
+        env: the environment (default: built from ``scenario`` and ``settings.env``).
+        settings: loop settings.
+        observer: receives every event (default: none).
+        learner: an existing Q-learner to continue (unknown reward; default: a fresh one).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        env: HopperGridEnv | None = None,
+        settings: RunnerSettings | None = None,
+        observer: Observer | None = None,
+        learner: RobustQLearner | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.scenario = scenario
+        self.settings = settings or RunnerSettings()
+        self.env = env or HopperGridEnv(scenario, settings=self.settings.env)
+        self.observer = observer or Observer()
+        self.clock = clock
+        self.grid = self.env.grid
+        self.automaton = translate(scenario.formula)
+        self.accepting_sink, self.rejecting_sink = automaton_sinks(self.automaton)
+        pp = self.env.model.perturbation
+        rp = scenario.runner
+        self.synthesis_settings = ResynthesisSettings(
+            samples_per_axis=self.settings.samples_per_axis,
+            delta=self.settings.delta,
+            noise=TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
+            p_sat=scenario.p_sat,
+            discount=rp.discount,
+        )
+        self.switching = SwitchingSettings(
+            p_rl_explore=rp.p_rl_ee, c=rp.c, eps=rp.eps, p_sat=scenario.p_sat
+        )
+        nq = self.automaton.n_states
+        n_product = self.grid.n_states * nq
+        if scenario.reward_known:
+            self.learner = None
+        elif learner is not None:
+            if learner.n_states != n_product:
+                raise ValueError(
+                    f"the Q-learner has {learner.n_states} states, this scenario's product "
+                    f"{n_product}"
+                )
+            self.learner = learner
+        else:
+            qs = self.settings.q_learning or QLearningSettings()
+            self.learner = RobustQLearner(
+                n_product,
+                len(ACTIONS),
+                self.grid.n_states,
+                state_cell=np.arange(n_product) // nq,
+                settings=QLearningSettings(
+                    discount=rp.discount,
+                    learning_rate=qs.learning_rate,
+                    epsilon=qs.epsilon,
+                    prior_reward=qs.prior_reward,
+                ),
+            )
+        res = self.settings.map_resolution
+        w = scenario.world
+        self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
+        self.map_y = (np.arange(w.ny * res) + 0.5) * (w.cell / res)
+
+    # ------------------------------------------------------------------ synthesis
+    def _synthesise(
+        self,
+        gp: LandingErrorGP,
+        positions: list[np.ndarray],
+        errors: list[np.ndarray],
+        current: int | None,
+        previous: Resynthesis | None = None,
+    ) -> Resynthesis:
+        pos = np.asarray(positions, dtype=float).reshape(-1, 2)
+        err = np.asarray(errors, dtype=float).reshape(-1, 2)
+        return resynthesise(
+            gp,
+            self.grid,
+            self.automaton,
+            pos,
+            err,
+            reward=self.env.reward_table if self.learner is None else None,
+            learner=self.learner,
+            initial_cell=int(self.grid.locate(np.asarray(self.scenario.start)[None])[0]),
+            current_state=current,
+            settings=self.synthesis_settings,
+            previous=previous,
+            clock=self.clock,
+        )
+
+    def _synthesis_event(
+        self, run_index: int, step: int, gp: LandingErrorGP, res: Resynthesis
+    ) -> SynthesisEvent:
+        gx, gy = np.meshgrid(self.map_x, self.map_y, indexing="ij")
+        mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
+        shape = (*gx.shape, 2)
+        return SynthesisEvent(
+            run_index=run_index,
+            step=step,
+            grid_x=self.map_x,
+            grid_y=self.map_y,
+            gp_mean=mean.reshape(shape),
+            gp_std=std.reshape(shape),
+            p_worst_initial=float(res.satisfaction.values[res.product.initial]),
+            timings=dict(res.timings),
+        )
+
+    # ------------------------------------------------------------------ runs
+    def run(self, seed: int, run_index: int = 0) -> RunEnd:
+        """One complete run; ``seed`` fixes the landing noise and every policy draw."""
+        with torch_threads(self.settings.torch_threads):
+            return self._run(seed, run_index)
+
+    def _run(self, seed: int, run_index: int) -> RunEnd:
+        t_start = self.clock()
+        env_seed, policy_seed, gp_seed = np.random.SeedSequence(seed).generate_state(3)
+        rng = np.random.default_rng(policy_seed)
+        self.observer.on_run_start(RunStart(run_index, self.scenario, int(seed)))
+        obs, _ = self.env.reset(seed=int(env_seed))
+        gp = LandingErrorGP(self.settings.gp, seed=int(gp_seed))
+        positions: list[np.ndarray] = []
+        errors: list[np.ndarray] = []
+        timings = {"gp_fit": 0.0, "abstraction": 0.0, "synthesis": 0.0, "hops": 0.0}
+        batch_max = 0.0
+
+        def install(res: Resynthesis, step: int) -> None:
+            nonlocal batch_max
+            for k, v in res.timings.items():
+                timings[k] = timings.get(k, 0.0) + v
+            batch_max = max(batch_max, sum(res.timings.values()))
+            policy.resynthesise(
+                res.exploration, res.goal, res.satisfaction.values, res.fallback, rl=res.rl
+            )
+            self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res))
+
+        res = self._synthesise(gp, positions, errors, None)
+        product = res.product
+        pstate = product.entry_state(obs["cell"])
+        policy = SwitchingPolicy(self.switching, res.rl)
+        install(res, 0)
+        nq = self.automaton.n_states
+        total, backups, steps = 0.0, 0, 0
+        outcome, reason = "timeout", "step cap"
+        if self.accepting_sink[pstate % nq]:
+            outcome, reason = "success", "accepted at the start"
+        elif self.rejecting_sink[pstate % nq]:
+            outcome, reason = "violation", "rejected at the start"
+        rp = self.scenario.runner
+        while outcome == "timeout" and steps < rp.max_steps:
+            decision = policy.decide(pstate, rng)
+            t0 = self.clock()
+            obs, reward, terminated, _, info = self.env.step(
+                decision.action, allowed=np.asarray(decision.allowed, dtype=int)
+            )
+            timings["hops"] += self.clock() - t0
+            si = info["step"]
+            steps += 1
+            backups += int(si.decision.backup_used)
+            if not si.hop.ok:
+                outcome, reason = "violation", f"hop failed: {si.hop.status}"
+                break
+            positions.append(si.start_pos)
+            errors.append(si.error)
+            landed = int(obs["cell"])
+            nxt = product.step(pstate, landed)
+            if self.learner is not None:
+                self.learner.update(
+                    product.model,
+                    pstate,
+                    si.decision.executed,
+                    nxt,
+                    reward,
+                    allowed=res.nonviolating.actions,
+                )
+            total += reward
+            hop = si.hop
+            self.observer.on_hop(
+                HopEvent(
+                    run_index=run_index,
+                    step=steps - 1,
+                    phase=decision.phase,
+                    source=decision.source,
+                    backup=si.decision.backup_used,
+                    requested_action=ACTIONS[si.decision.requested],
+                    executed_action=ACTIONS[si.decision.executed],
+                    start_pos=si.start_pos,
+                    target=si.target,
+                    landing=obs["pos"],
+                    com_path=hop.com_path if len(hop.com_path) else np.zeros((0, 3)),
+                    foot=hop.foot,
+                    touchdown_time=hop.touchdown_time,
+                    cell=landed,
+                    product_state=nxt,
+                    p_worst=float(res.satisfaction.values[nxt]),
+                    reward=reward,
+                    total_reward=total,
+                    com_time=hop.com_path_time if len(hop.com_path) else None,
+                )
+            )
+            pstate = nxt
+            q = pstate % nq
+            if terminated:
+                outcome = "violation"
+                reason = "left the map" if landed == self.grid.out else "hazard"
+            elif self.rejecting_sink[q]:
+                outcome, reason = "violation", "specification violated"
+            elif self.accepting_sink[q]:
+                outcome, reason = "success", "specification satisfied"
+            elif steps % rp.batch_size == 0:
+                res = self._synthesise(gp, positions, errors, pstate, res)
+                product = res.product
+                install(res, steps)
+        timings["batch_max"] = batch_max
+        end = RunEnd(
+            run_index=run_index,
+            outcome=outcome,
+            steps=steps,
+            reward=total,
+            switch_step=policy.switch_step,
+            p_switch=policy.switch_probability,
+            backups=backups,
+            seconds=self.clock() - t_start,
+            timings=timings,
+            reason=reason,
+        )
+        self.observer.on_run_end(end)
+        return end
+
+    def run_many(self, runs: int | None = None, seed: int | None = None) -> list[RunEnd]:
+        """``runs`` consecutive runs (default: the scenario's) with seeds ``seed + k``
+        (default seed: the scenario's); an unknown reward's Q-learner carries over."""
+        rp = self.scenario.runner
+        n = rp.runs if runs is None else int(runs)
+        base = rp.seed if seed is None else int(seed)
+        return [self.run(base + k, run_index=k) for k in range(n)]
+
+
+def run_single(scenario: Scenario, seed: int, run_index: int = 0) -> RunEnd:
+    """One run of ``scenario`` with default settings and no observer (picklable, for worker
+    processes)."""
+    return NavigationRunner(scenario).run(seed, run_index=run_index)

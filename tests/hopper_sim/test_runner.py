@@ -1,0 +1,124 @@
+"""The navigation loop end to end on a short horizon (real MuJoCo hops, real synthesis)."""
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+
+from hopper_sim.environment import EnvSettings, EpisodeError, HopperGridEnv
+from hopper_sim.events import Observer
+from hopper_sim.runner import NavigationRunner, automaton_sinks
+from planner.imdp.grid import ACTIONS
+from planner.ltl.translate import translate
+from planner.scenario import load_scenario
+
+
+class Collect(Observer):
+    def __init__(self):
+        self.events = []
+
+    def on_run_start(self, e):
+        self.events.append(("start", e))
+
+    def on_hop(self, e):
+        self.events.append(("hop", e))
+
+    def on_synthesis(self, e):
+        self.events.append(("synthesis", e))
+
+    def on_run_end(self, e):
+        self.events.append(("end", e))
+
+
+@pytest.fixture(scope="module")
+def short_a():
+    return load_scenario("a").with_runner(max_steps=12, batch_size=5)
+
+
+@pytest.fixture(scope="module")
+def env(short_a):
+    return HopperGridEnv(short_a)
+
+
+def test_sinks_of_reach_avoid():
+    aut = translate("!Haz U Goal")
+    acc, rej = automaton_sinks(aut)
+    assert acc.sum() == 1 and rej.sum() == 1
+    assert aut.step(aut.initial, {"Goal"}) == int(np.flatnonzero(acc)[0])
+    assert aut.step(aut.initial, {"Haz"}) == int(np.flatnonzero(rej)[0])
+
+
+def test_short_run_events_are_consistent(short_a, env):
+    obs = Collect()
+    end = NavigationRunner(short_a, env=env, observer=obs).run(seed=3)
+    kinds = [k for k, _ in obs.events]
+    assert kinds[0] == "start" and kinds[-1] == "end" and kinds[1] == "synthesis"
+    hops = [e for k, e in obs.events if k == "hop"]
+    fell = end.reason.startswith("hop failed")
+    assert len(hops) == end.steps - fell and end.steps <= 12
+    # a re-synthesis after every 5 hops that did not end the run
+    synth_steps = [e.step for k, e in obs.events if k == "synthesis"]
+    assert synth_steps == [0, *(k for k in range(5, 13, 5) if k < end.steps)]
+    # hops chain: each starts where the previous landed; rewards add up
+    for a, b in itertools.pairwise(hops):
+        np.testing.assert_allclose(b.start_pos, a.landing)
+    assert end.reward == pytest.approx(sum(h.reward for h in hops))
+    assert end.backups == sum(h.backup for h in hops)
+    for h in hops:
+        assert h.executed_action in ACTIONS
+        assert 0.0 <= h.p_worst <= 1.0
+        assert h.cell == env.grid.locate(h.landing[None])[0]
+    if end.outcome == "success":
+        assert "Goal" in env.grid.labels[hops[-1].cell]
+    elif end.outcome == "violation":
+        assert end.reason
+    else:
+        assert end.steps == 12
+
+
+def test_same_seed_same_run(short_a, env):
+    def go():
+        obs = Collect()
+        end = NavigationRunner(short_a, env=env, observer=obs).run(seed=11)
+        hops = [e for k, e in obs.events if k == "hop"]
+        return end, np.array([h.landing for h in hops]), [h.executed_action for h in hops]
+
+    (e1, l1, a1), (e2, l2, a2) = go(), go()
+    assert np.array_equal(l1, l2) and a1 == a2
+    same = ("outcome", "steps", "reward", "switch_step", "p_switch", "backups", "reason")
+    assert all(getattr(e1, f) == getattr(e2, f) for f in same)
+
+
+def test_env_rejects_bad_use(short_a, env):
+    fresh = HopperGridEnv(short_a, model=env.model, controller=env.controller)
+    with pytest.raises(EpisodeError, match="reset"):
+        fresh.step(0)
+    fresh.reset(seed=0)
+    with pytest.raises(EpisodeError, match="not"):
+        fresh.step(2, allowed=np.array([0, 1]))
+
+
+def test_env_without_perturbations_lands_near_target(short_a, env):
+    quiet = HopperGridEnv(
+        short_a,
+        model=env.model,
+        controller=env.controller,
+        settings=EnvSettings(terrain=False, noise=False),
+    )
+    quiet.reset(seed=0)
+    _, reward, terminated, _, info = quiet.step(ACTIONS.index("E2"))
+    step = info["step"]
+    assert step.hop.ok and not terminated
+    assert np.linalg.norm(step.error) < 0.15
+    assert reward == quiet.reward_table[quiet.cell]
+
+
+def test_unknown_reward_learner_carries_over(short_a, env):
+    sc = dataclasses.replace(short_a, reward_known=False).with_runner(max_steps=6)
+    runner = NavigationRunner(sc, env=env)
+    ends = runner.run_many(2, seed=5)
+    assert [e.run_index for e in ends] == [0, 1]
+    assert runner.learner is not None
+    landed = sum(e.steps - e.reason.startswith("hop failed") for e in ends)
+    assert runner.learner.reward_count.sum() == landed
