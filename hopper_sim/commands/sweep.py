@@ -1,0 +1,178 @@
+"""``hopnav sweep``: reproduce the paper's Table I (reward / steps over P_RL,ee = C x eps).
+
+Runs ``--runs`` complete navigation runs for each cell of the grid
+``P_RL,ee = C in {0.25, 0.5, 0.75}`` x ``eps in {0.0025, 0.005, 0.0075}`` on a scenario
+(default: case study ``a``), in parallel worker processes (``--backend process``, the
+default), in this process (``serial``) or on a Ray cluster (``ray``, optional extra). Prints
+the table beside the paper's and writes ``sweep_runs.csv`` (one row per run),
+``sweep_summary.csv`` (per cell, 95 % Student-t intervals) and ``table_i.md`` to ``--out``.
+The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
+number of workers.
+
+``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted sweep
+leaves the runs it finished; ``--resume`` reuses them (same scenario file, checked through
+``sweep_meta.json``; a run is reused when its cell, run number and seed match) and runs the
+rest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+META_FILE = "sweep_meta.json"
+
+
+def _levels(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from err
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "sweep",
+        help="reproduce Table I: reward / steps over P_RL,ee = C x eps, with 95 %% CIs",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--scenario", default="a", help="shipped name (a-d) or TOML path [a]")
+    p.add_argument("--runs", type=int, default=10, help="runs per cell [10]")
+    p.add_argument("--seed", type=int, default=0, help="base seed of all runs [0]")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers [number of cores]")
+    p.add_argument(
+        "--backend", choices=("process", "serial", "ray"), default="process", help="[process]"
+    )
+    p.add_argument("--ray-address", default=None, help="Ray cluster address [local instance]")
+    p.add_argument(
+        "--cs", type=_levels, default=None, help="comma-separated C values [0.25,0.5,0.75]"
+    )
+    p.add_argument(
+        "--epss", type=_levels, default=None, help="comma-separated eps [0.0025,0.005,0.0075]"
+    )
+    p.add_argument("--out", default=os.path.join("runs", "sweep"), help="[runs/sweep]")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--resume", action="store_true", help="reuse the finished runs found in --out")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from hopper_sim.sweep import (
+        PAPER_CS,
+        PAPER_EPSS,
+        SweepBackendError,
+        SweepError,
+        SweepRow,
+        SweepRunError,
+        SweepSpec,
+        run_sweep,
+    )
+    from hopper_sim.sweep_files import (
+        ROWS_FILE,
+        SweepFileError,
+        atomic_write_text,
+        format_table,
+        read_rows_csv,
+        rows_csv,
+        write_outputs,
+    )
+    from planner.errors import ScenarioError
+    from planner.scenario import load_scenario, resolve_scenario_path
+
+    out = Path(args.out)
+    try:
+        scenario = load_scenario(args.scenario)
+        digest = hashlib.sha256(resolve_scenario_path(args.scenario).read_bytes()).hexdigest()
+        spec = SweepSpec(
+            cs=args.cs or PAPER_CS, epss=args.epss or PAPER_EPSS, runs=args.runs, seed=args.seed
+        )
+        previous = _previous_rows(out, scenario.name, digest, read_rows_csv) if args.resume else []
+    except (ScenarioError, SweepError, SweepFileError) as err:
+        print(f"hopnav sweep: {err}", file=sys.stderr)
+        return 2
+    order = {(t.c, t.eps, t.run, t.seed): t.index for t in spec.tasks()}
+    finished: list[SweepRow] = [r for r in previous if (r.c, r.eps, r.run, r.seed) in order]
+    bar = tqdm(total=spec.n_runs, unit="run", desc=f"sweep {scenario.name}", disable=args.json)
+
+    def progress(done: int, total: int, row: SweepRow) -> None:
+        if done == 1:
+            bar.update(spec.n_runs - total - bar.n)  # the reused runs
+            meta = {"scenario": scenario.name, "scenario_sha256": digest}
+            atomic_write_text(out / META_FILE, json.dumps(meta, indent=2) + "\n")
+        finished.append(row)
+        finished.sort(key=lambda r: order[(r.c, r.eps, r.run, r.seed)])
+        atomic_write_text(out / ROWS_FILE, rows_csv(finished))
+        bar.update(1)
+        bar.set_postfix_str(f"C={row.c:g} eps={row.eps:g} {row.outcome} {row.steps} hops")
+
+    try:
+        result = run_sweep(
+            scenario,
+            spec,
+            backend=args.backend,
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=progress,
+            previous=previous,
+        )
+    except (SweepBackendError, SweepError) as err:
+        print(f"hopnav sweep: {err}", file=sys.stderr)
+        return 2
+    except SweepRunError as err:
+        print(
+            f"hopnav sweep: {err}\nhopnav sweep: the {len(finished)} finished runs are in "
+            f"{out / ROWS_FILE}; after a fix, add --resume to run only the others",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        bar.close()
+    paths = write_outputs(result, args.out)
+    if args.json:
+        record = result.to_json()
+        record["files"] = {k: str(v) for k, v in paths.items()}
+        print(json.dumps(record, indent=2, allow_nan=False))
+        return 0
+    print(format_table(result))
+    print(
+        f"\n{spec.n_runs} runs in {result.seconds:.1f} s ({result.backend}, {result.workers} "
+        "workers)"
+    )
+    for kind, path in paths.items():
+        print(f"{kind}: {path}")
+    return 0
+
+
+def _previous_rows(
+    out: Path, name: str, digest: str, read_rows: Callable[[Path], list[Any]]
+) -> list[Any]:
+    """The finished rows in ``out`` for ``--resume``; empty if there are none.
+
+    Raises:
+        SweepError: the rows in ``out`` belong to another scenario file.
+    """
+    from hopper_sim.sweep import SweepError
+    from hopper_sim.sweep_files import ROWS_FILE
+
+    rows_path, meta_path = out / ROWS_FILE, out / META_FILE
+    if not rows_path.is_file():
+        return []
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise SweepError(f"cannot resume: {meta_path} is missing or unreadable ({err})") from err
+    if meta.get("scenario_sha256") != digest:
+        raise SweepError(
+            f"cannot resume: the runs in {out} are of scenario {meta.get('scenario')!r} from "
+            f"another scenario file than {name!r}; use another --out"
+        )
+    return read_rows(rows_path)
