@@ -10,8 +10,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
-import tempfile
 from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -26,6 +24,7 @@ from hopper_sim.sweep import (
     SweepRow,
     summary_record,
 )
+from planner.atomic import atomic_write
 
 ROWS_FILE = "sweep_runs.csv"
 SUMMARY_FILE = "sweep_summary.csv"
@@ -170,20 +169,12 @@ def format_table(result: SweepResult) -> str:
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and
-    ``os.replace``, so that ``path`` is either the old file or the complete new one."""
+    """Write ``text`` to ``path`` atomically (:func:`planner.atomic.atomic_write`), creating
+    its folder; ``path`` is either the old file or the complete new one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path, "w", fsync=True, newline="") as fh:
+        fh.write(text)
     return path
 
 
