@@ -23,6 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from planner.ltl.interning import intern
 from planner.ltl.reduce import _scc
 
 Raw = tuple  # (table, initial, pairs, names)
@@ -104,11 +105,7 @@ def product(raws: Sequence[Raw], conjunction: bool) -> Raw | None:
                     c += 1
                 new_counters.append(c)
             key = (nxt, tuple(new_counters))
-            t = index.get(key)
-            if t is None:
-                t = len(keys)
-                index[key] = t
-                keys.append(key)
+            t = intern(key, index, keys)
             row.append(t)
         rows.append(row)
         j += 1

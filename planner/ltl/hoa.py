@@ -28,6 +28,7 @@ import numpy as np
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import HOAError, NondeterministicAutomatonError
 from planner.ltl.boolean import cover
+from planner.ltl.interning import intern
 from planner.ltl.reduce import reduce_rabin
 
 
@@ -451,11 +452,7 @@ def _to_rabin(table, marks, start, acceptance, aps) -> RabinAutomaton:
                         c += 1
                     counters.append(c)
                 nxt = (target, m, tuple(counters))
-            j = index.get(nxt)
-            if j is None:
-                j = len(states)
-                index[nxt] = j
-                states.append(nxt)
+            j = intern(nxt, index, states)
             row.append(j)
         rows.append(row)
         i += 1

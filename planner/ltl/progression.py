@@ -20,6 +20,7 @@ A DNF equal to :data:`TT` is ``true``, one equal to :data:`FF` is ``false``.
 
 from __future__ import annotations
 
+from planner.ltl.interning import intern
 from planner.ltl.syntax import FALSE, TRUE, Formula
 
 DNF = frozenset
@@ -179,11 +180,7 @@ def explore(
         row = []
         for letter in range(n_letters):
             nxt = prog.af(states[i], letter)
-            j = index.get(nxt)
-            if j is None:
-                j = len(states)
-                index[nxt] = j
-                states.append(nxt)
+            j = intern(nxt, index, states)
             row.append(j)
         table.append(row)
         i += 1

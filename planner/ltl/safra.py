@@ -31,6 +31,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from planner.ltl.interning import intern
+
 Node = tuple  # (name: int, label: int bitmask over NBA states, children: tuple[Node, ...])
 
 
@@ -176,11 +178,7 @@ def determinise(
             n_old = count(tree) if tree is not None else 0
             for a in range(n_letters):
                 nxt = step(tree, n_old, a)
-                j = index.get(nxt)
-                if j is None:
-                    j = len(states)
-                    index[nxt] = j
-                    states.append(nxt)
+                j = intern(nxt, index, states)
                 row.append(j)
             rows_by_tree[tree] = row
         table.append(row)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planner.ltl.interning import intern
 from planner.ltl.syntax import Formula
 
 
@@ -142,11 +143,7 @@ def build_tgba(formula: Formula, propositions: tuple[str, ...]) -> TGBA:
                     letters &= ~with_bit[b]
             if not letters:
                 continue
-            j = index.get(nxt)
-            if j is None:
-                j = len(states)
-                index[nxt] = j
-                states.append(nxt)
+            j = intern(nxt, index, states)
             key = (j, all_acc & ~post)
             out[key] = out.get(key, 0) | letters
         edges.append([(letters, j, acc) for (j, acc), letters in out.items()])

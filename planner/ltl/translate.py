@@ -42,6 +42,7 @@ from scipy.sparse.csgraph import connected_components
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import AutomatonError
 from planner.ltl.compose import delay, product
+from planner.ltl.interning import intern
 from planner.ltl.parser import parse
 from planner.ltl.progression import FF, TT, Progression, dnf_and, explore
 from planner.ltl.reduce import reduce_rabin
@@ -199,11 +200,7 @@ def _monitor(f: Formula, props: tuple[str, ...], recurrence: bool):
         for a in range(1 << len(props)):
             nxt = prog.af(keys[i][0], a)
             key = (start_dnf, True) if nxt == done else (nxt, False)
-            j = index.get(key)
-            if j is None:
-                j = len(keys)
-                index[key] = j
-                keys.append(key)
+            j = intern(key, index, keys)
             row.append(j)
         rows.append(row)
         i += 1
@@ -249,11 +246,7 @@ def _breakpoint(psi: Formula, props: tuple[str, ...], complement: bool):
                     key = (y1, TT, True)
                 else:
                     key = (x1, y1, False)
-            j = index.get(key)
-            if j is None:
-                j = len(keys)
-                index[key] = j
-                keys.append(key)
+            j = intern(key, index, keys)
             row.append(j)
         rows.append(row)
         i += 1
