@@ -21,9 +21,10 @@ from tqdm import tqdm
 
 from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT, load_checkpoint
 from hopper_sim.controller.controller import LegAngleController
-from hopper_sim.controller.tracking import ACTION_NAMES, track_random_actions
+from hopper_sim.controller.tracking import track_random_actions
 from hopper_sim.model import HopperModel
 from hopper_sim.terrain import TerrainField
+from planner.imdp.grid import ACTIONS
 
 
 def row(name: str, e: np.ndarray, extra: str = "") -> str:
@@ -62,7 +63,7 @@ def main() -> None:
     mode = "perturbations and noise ON" if args.perturbed else "perturbations and noise off"
     print(f"{args.hops} chained hops, {mode}, seed {args.seed}, {wall:.1f} s")
     print(f"  {'action':<8}{'n':>6}{'median':>10}{'p95':>10}{'max':>10}  landing error [m]")
-    for a, name in enumerate(ACTION_NAMES):
+    for a, name in enumerate(ACTIONS):
         sel = res.executed == a
         print(row(name, res.error[sel], f"   (requested {int((res.requested == a).sum())})"))
     print(row("all", res.error))

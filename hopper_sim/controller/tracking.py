@@ -22,11 +22,7 @@ from hopper_sim.hop import simulate_hop
 from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.terrain import ForceField
-
-ACTION_NAMES: tuple[str, ...] = ("N1", "N2", "E1", "E2", "S1", "S2", "W1", "W2")
-ACTION_OFFSETS = np.array(
-    [[0, 1], [0, 2], [1, 0], [2, 0], [0, -1], [0, -2], [-1, 0], [-2, 0]], dtype=float
-)
+from planner.imdp.grid import ACTION_OFFSETS, ACTIONS
 
 
 @dataclass
@@ -72,10 +68,10 @@ def track_random_actions(
     ok = np.zeros(n_hops, dtype=bool)
     in_range = np.zeros(n_hops, dtype=bool)
     for k in range(n_hops):
-        req[k] = int(rng.integers(len(ACTION_NAMES)))
+        req[k] = int(rng.integers(len(ACTIONS)))
         targets = (np.floor(pos / cell) + 0.5 + ACTION_OFFSETS) * cell
         t0 = time.perf_counter()
-        d = controller.decide(pos, vel, range(len(ACTION_NAMES)), targets, int(req[k]))
+        d = controller.decide(pos, vel, range(len(ACTIONS)), targets, int(req[k]))
         out["latency"][k] = time.perf_counter() - t0
         nu = sample_model_noise(model, rng, 1)[0] if noise else None
         r = simulate_hop(
