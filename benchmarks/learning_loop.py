@@ -1,11 +1,11 @@
-"""Pure-planning learning loop on the provisional case (a) layout (15 x 15), no MuJoCo.
+"""Pure-planning learning loop on the case (a) layout (15 x 15), no MuJoCo.
 
 Hops are simulated from the abstraction's own landing model: landing = target centre +
 e(departure) + nu, with a smooth synthetic error field e (amplitude about 0.3 m) and the
 truncated-Gaussian noise nu. After every batch the loop calls
 :func:`planner.learning.resynthesise` (GP refit, intervals, product, synthesis) and prints the
 per-batch timings, their worst total against the 1 s budget of the issue (ratio), and the run's
-outcome. The layout is copied from the scenario branch's ``a.toml`` (provisional).
+outcome. The layout is the shipped scenario ``a``.
 
     python benchmarks/learning_loop.py [--seed 0] [--runs 1] [--beta B] [--batch 50] [--cap 500]
 """
@@ -28,35 +28,24 @@ from planner.gp import LandingErrorGP
 from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import ResynthesisSettings, resynthesise
+from planner.ltl.translate import translate
 from planner.policy import SwitchingPolicy, SwitchingSettings
+from planner.scenario import load_scenario
 
 BUDGET_S = 1.0
 
 
 def case_a() -> tuple[GridWorld, np.ndarray, int]:
-    labels = np.empty((15, 15), dtype=object)
-    w = np.zeros(15 * 15 + 1)
-
-    def rect(x0: int, y0: int, x1: int, y1: int) -> list[tuple[int, int]]:
-        return [(i, j) for i in range(x0, x1) for j in range(y0, y1)]
-
-    for ij in rect(13, 6, 15, 9):
-        labels[ij] = "Goal"
-    for ij in rect(7, 0, 9, 6) + rect(7, 9, 9, 15) + rect(11, 4, 12, 6) + rect(11, 10, 12, 12):
-        labels[ij] = "Haz"
-    for ij in [*rect(1, 12, 3, 14), (4, 13), (3, 11)]:
-        w[ij[0] * 15 + ij[1]] = 20.0
-    for ij in [*rect(1, 1, 3, 3), (4, 2), (3, 4)]:
-        w[ij[0] * 15 + ij[1]] = 5.0
-    for ij in [(4, 5), (5, 5), (4, 9), (5, 9), (6, 7), (9, 7), (11, 8)]:
-        w[ij[0] * 15 + ij[1]] = -0.5
-    return GridWorld(15, 15, 1.0, labels=labels), w, 1 * 15 + 7
+    """The shipped case (a): grid with labels, reward per grid state, start cell."""
+    sc = load_scenario("a")
+    w = sc.world
+    grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
+    return grid, np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0), sc.start_cell
 
 
 def until_automaton() -> RabinAutomaton:
-    """``!Haz U Goal``; letters: bit 0 Goal, bit 1 Haz; 0 waiting, 1 accepted, 2 rejected."""
-    table = np.array([[0, 1, 2, 1], [1, 1, 1, 1], [2, 2, 2, 2]])
-    return RabinAutomaton(("Goal", "Haz"), table, 0, [({1}, set())])
+    """The automaton of case (a)'s formula ``!Haz U Goal``."""
+    return translate(load_scenario("a").formula)
 
 
 def field(p: np.ndarray) -> np.ndarray:
