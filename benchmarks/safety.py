@@ -55,7 +55,14 @@ def main() -> None:
     succ = outcomes.count("success")
     lo, hi = wilson(succ, n)
     p_sw = np.array([e.p_switch for e in ends if e.p_switch is not None])
-    print(f"\n{n} runs in {wall:.0f} s wall ({np.mean([e.seconds for e in ends]):.1f} s per run)")
+    secs = np.array([e.seconds for e in ends])
+    batch = np.array([e.timings.get("batch_max", 0.0) for e in ends])
+    print(f"\n{n} runs in {wall:.0f} s wall")
+    print(
+        f"run time: median {np.median(secs):.1f} s, max {secs.max():.1f} s (target <= 60 s); "
+        f"longest re-synthesis: median {np.median(batch):.2f} s, max {batch.max():.2f} s "
+        f"(target <= 1 s)"
+    )
     print(f"hazard or off-map: {hazard}  (target 0)   hop failures: {fell}")
     print(f"success {succ}/{n} = {succ / n:.3f} (95 % Wilson [{lo:.3f}, {hi:.3f}])")
     if p_sw.size:
