@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
+from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
@@ -405,7 +406,15 @@ def _reach_sweeps(
     residual = 0.0
     it = 0
     exact = False
+    next_eval = _FIRST_EVALUATION if maximize else alg.max_iterations + 1
     while it < alg.max_iterations:
+        if it >= next_eval and not exact:
+            next_eval *= 2
+            x = _evaluate_greedy(m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance)
+            if x is not None:
+                v = np.maximum(v, x)
+                for adv, _, _ in layers:
+                    adv.update(v)
         it += 1
         residual = 0.0
         for adv, seg, states in layers:
@@ -427,6 +436,26 @@ def _reach_sweeps(
     return v, residual, it
 
 
+_FIRST_EVALUATION = 16
+"""Sweeps before the first strategy evaluation (then after 32, 64, ... sweeps)."""
+
+
+def _evaluate_greedy(
+    m: IMDP,
+    free_rows: np.ndarray,
+    v: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    tol: float,
+) -> np.ndarray | None:
+    """``V_sigma`` (:func:`strategy_reach_value`) of the strategy greedy for ``v``."""
+    rs = m.row_state[free_rows]
+    seg = first_of_runs(rs)
+    q = OrderingAdversary(m, adversary_minimizes, rows=free_rows).expectation(v)
+    choice = _strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
+    return strategy_reach_value(m, choice[rs[seg]], fixed_val, adversary_minimizes, v)
+
+
 def _strategy(
     m: IMDP,
     free_rows: np.ndarray,
@@ -438,7 +467,24 @@ def _strategy(
     prop: ReachAvoid | DiscountedReward,
     tol: float,
 ) -> np.ndarray:
-    """Memoryless strategy: an optimal row per free state (-1 elsewhere).
+    """Memoryless strategy: an optimal action per free state (-1 elsewhere)."""
+    reach_max = isinstance(prop, ReachAvoid) and maximize
+    choice = _strategy_rows(m, free_rows, q_free, seg, seg_states, v, maximize, reach_max, tol)
+    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
+
+
+def _strategy_rows(
+    m: IMDP,
+    free_rows: np.ndarray,
+    q_free: np.ndarray,
+    seg: np.ndarray,
+    seg_states: np.ndarray,
+    v: np.ndarray,
+    maximize: bool,
+    reach_max: bool,
+    tol: float,
+) -> np.ndarray:
+    """An optimal row per free state (-1 elsewhere).
 
     For maximal reachability, optimal rows are picked by a robust attractor from the
     states already settled (value fixed, or 0), so the strategy cannot idle inside an end
@@ -457,7 +503,7 @@ def _strategy(
     opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
     first = opt_local[first_of_runs(rs[opt_local])]
     choice[rs[first]] = free_rows[first]
-    if isinstance(prop, ReachAvoid) and maximize:
+    if reach_max:
         free = np.zeros(n, dtype=bool)
         free[seg_states] = True
         settled = ~free | (v <= 0)
@@ -465,4 +511,4 @@ def _strategy(
         cand[free_rows[opt_local]] = True
         _, attr = graph._attractor(m, settled, cand)
         choice = np.where((attr >= 0) & free, attr, choice)
-    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
+    return choice
