@@ -410,7 +410,7 @@ def _reach_sweeps(
     while it < alg.max_iterations:
         if it >= next_eval and not exact:
             next_eval *= 2
-            x = _evaluate_greedy(m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance)
+            x = _strategy_iteration(m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance)
             if x is not None:
                 v = np.maximum(v, x)
                 for adv, _, _ in layers:
@@ -437,10 +437,13 @@ def _reach_sweeps(
 
 
 _FIRST_EVALUATION = 16
-"""Sweeps before the first strategy evaluation (then after 32, 64, ... sweeps)."""
+"""Sweeps before the first strategy iteration (then after 32, 64, ... sweeps)."""
+
+_MAX_IMPROVEMENTS = 100
+"""Strategy improvement rounds per strategy iteration."""
 
 
-def _evaluate_greedy(
+def _strategy_iteration(
     m: IMDP,
     free_rows: np.ndarray,
     v: np.ndarray,
@@ -448,12 +451,42 @@ def _evaluate_greedy(
     adversary_minimizes: bool,
     tol: float,
 ) -> np.ndarray | None:
-    """``V_sigma`` (:func:`strategy_reach_value`) of the strategy greedy for ``v``."""
+    """Robust strategy iteration for maximal reachability, started from the strategy
+    greedy for ``v``; returns ``V_sigma`` of the last strategy (``None`` if the first
+    evaluation gave up).
+
+    Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
+    best response included) and switches a state to its best row only where that row's
+    robust value exceeds the current row's by more than ``tol / 100``. Because switches
+    are strict, ``V_sigma`` never decreases and no new end component can trap mass that
+    had a positive value; when no state switches, ``V_sigma`` is a fixed point of the
+    Bellman operator (within the slack) and, being a strategy's value, at most the least
+    fixed point: it *is* the least fixed point.
+    """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
-    q = OrderingAdversary(m, adversary_minimizes, rows=free_rows).expectation(v)
+    seg_id = np.cumsum(np.concatenate(([0], (rs[1:] != rs[:-1]).astype(np.int64))))
+    full = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
+    q = full.expectation(v)
     choice = _strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
-    return strategy_reach_value(m, choice[rs[seg]], fixed_val, adversary_minimizes, v)
+    sigma = choice[rs[seg]]
+    slack = tol * 1e-2
+    best: np.ndarray | None = None
+    for _ in range(_MAX_IMPROVEMENTS):
+        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, v)
+        if x is None:
+            break
+        best = x
+        q = full.expectation(x)
+        q_best = np.maximum.reduceat(q, seg)
+        q_sigma = q[np.searchsorted(free_rows, sigma)]
+        better = q_best > q_sigma + slack
+        if not better.any():
+            break
+        top = np.flatnonzero(q >= q_best[seg_id])
+        top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
+        sigma = np.where(better, free_rows[top], sigma)
+    return best
 
 
 def _strategy(

@@ -110,15 +110,18 @@ def ref_discounted(
 def slow_leak_imdp(rng: np.random.Generator, n_states: int = 7, leak: float = 1e-5) -> IMDP:
     """Random IMDP whose states keep ``1 - leak`` of their mass on themselves: value
     iteration from 0 creeps up by about ``leak`` per sweep. State 0 is a sink, state 1 the
-    (absorbing) goal; the other states have two actions."""
+    (absorbing) goal; the other states have two actions, each with a forced (``lower > 0``)
+    leak into the sink, so no state but the goal has value 1."""
     s, a, t, lo, up = [0, 1], [0, 0], [0, 1], [1.0, 1.0], [1.0, 1.0]
     for q in range(2, n_states):
         for act in range(2):
-            others = [x for x in range(n_states) if x != q]
-            succ = rng.choice(others, size=int(rng.integers(1, 4)), replace=False)
+            others = [x for x in range(1, n_states) if x != q]
+            succ = np.concatenate(
+                ([0], rng.choice(others, size=int(rng.integers(1, 4)), replace=False))
+            )
             p = rng.dirichlet(np.ones(succ.size)) * leak
             lower = p * rng.uniform(0.3, 1.0, size=succ.size)
-            lower[rng.random(succ.size) < 0.4] = 0.0
+            lower[1:][rng.random(succ.size - 1) < 0.4] = 0.0
             upper = p * rng.uniform(1.0, 2.0, size=succ.size)
             s += [q] * (succ.size + 1)
             a += [act] * (succ.size + 1)
