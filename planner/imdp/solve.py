@@ -295,8 +295,11 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         rows=free_rows,
         resort_tolerance=0.0 if reward is None else alg.tolerance * 1e-2,
     )
+    sigma: np.ndarray | None = None
     if reward is None:
-        v, residual, it = _reach_sweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+        v, residual, it, sigma = _reach_sweeps(
+            m, free_rows, fixed_val, adversary_minimizes, maximize, alg
+        )
     else:
         v, residual, it = fixed_val.copy(), 0.0, 0
         while free_rows.size and it < alg.max_iterations:
@@ -316,6 +319,9 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
                 full.resort_tolerance = 0.0
     q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
+    if sigma is not None:
+        # strategy iteration's strategy: its exact value is the least fixed point
+        strategy[seg_states] = m.row_action[sigma]
     if isinstance(prop, ReachAvoid) and maximize and pessimistic:
         strategy = np.where(prob1 & (prob1_choice >= 0), m.row_action[prob1_choice], strategy)
     final_v = backup(v)
@@ -382,11 +388,12 @@ def _reach_sweeps(
     changes no value by ``tolerance`` or more, sweeps use the exact order until one again
     changes none by that much; that change is the reported residual.
 
-    Returns ``(values, residual, sweeps)``.
+    Returns ``(values, residual, sweeps, strategy)``: ``strategy`` is the last strategy
+    iteration's optimal strategy (one row per free state) or ``None``.
     """
     v = fixed_val.copy()
     if free_rows.size == 0:
-        return v, 0.0, 0
+        return v, 0.0, 0, None
     rs = m.row_state[free_rows]
     dist = _layers(m, free_rows, fixed_val == 1.0)
     dist = np.where(np.isfinite(dist), dist, np.inf)
@@ -407,10 +414,13 @@ def _reach_sweeps(
     it = 0
     exact = False
     next_eval = _FIRST_EVALUATION if maximize else alg.max_iterations + 1
+    sigma: np.ndarray | None = None
     while it < alg.max_iterations:
         if it >= next_eval and not exact:
             next_eval *= 2
-            x = _strategy_iteration(m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance)
+            x, sigma = _strategy_iteration(
+                m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+            )
             if x is not None:
                 v = np.maximum(v, x)
                 for adv, _, _ in layers:
@@ -433,7 +443,7 @@ def _reach_sweeps(
             if exact:
                 break
             exact = True
-    return v, residual, it
+    return v, residual, it, sigma
 
 
 _FIRST_EVALUATION = 16
@@ -450,10 +460,13 @@ def _strategy_iteration(
     fixed_val: np.ndarray,
     adversary_minimizes: bool,
     tol: float,
-) -> np.ndarray | None:
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Robust strategy iteration for maximal reachability, started from the strategy
-    greedy for ``v``; returns ``V_sigma`` of the last strategy (``None`` if the first
-    evaluation gave up).
+    greedy for ``v``.
+
+    Returns ``(values, strategy)``: ``V_sigma`` of the last strategy evaluated (``None``
+    if the first evaluation gave up), and that strategy (one row per free state) if no
+    state wanted to switch any more, else ``None``.
 
     Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
     best response included) and switches a state to its best row only where that row's
@@ -475,18 +488,18 @@ def _strategy_iteration(
     for _ in range(_MAX_IMPROVEMENTS):
         x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, v)
         if x is None:
-            break
+            return best, None
         best = x
         q = full.expectation(x)
         q_best = np.maximum.reduceat(q, seg)
         q_sigma = q[np.searchsorted(free_rows, sigma)]
         better = q_best > q_sigma + slack
         if not better.any():
-            break
+            return best, sigma
         top = np.flatnonzero(q >= q_best[seg_id])
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
-    return best
+    return best, None
 
 
 def _strategy(
