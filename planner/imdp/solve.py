@@ -416,7 +416,7 @@ def _reach_sweeps(
     next_eval = _FIRST_EVALUATION if maximize else alg.max_iterations + 1
     sigma: np.ndarray | None = None
     while it < alg.max_iterations:
-        if it >= next_eval and not exact:
+        if it >= next_eval:
             next_eval *= 2
             x, sigma = _strategy_iteration(
                 m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
