@@ -413,18 +413,20 @@ def _reach_sweeps(
     residual = 0.0
     it = 0
     exact = False
-    next_eval = _FIRST_EVALUATION if maximize else alg.max_iterations + 1
+    next_eval = _FIRST_EVALUATION if maximize else alg.max_iterations
     sigma: np.ndarray | None = None
+    history: list[float] = []
     while it < alg.max_iterations:
         if it >= next_eval:
             next_eval *= 2
-            x, sigma = _strategy_iteration(
-                m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
-            )
-            if x is not None:
-                v = np.maximum(v, x)
-                for adv, _, _ in layers:
-                    adv.update(v)
+            if _creeping(history, alg.tolerance):
+                x, sigma = _strategy_iteration(
+                    m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+                )
+                if x is not None:
+                    v = np.maximum(v, x)
+                    for adv, _, _ in layers:
+                        adv.update(v)
         it += 1
         residual = 0.0
         for adv, seg, states in layers:
@@ -439,6 +441,7 @@ def _reach_sweeps(
             v[states] = new
         if alg.callback is not None:
             alg.callback(it, residual)
+        history.append(residual)
         if residual < alg.tolerance:
             if exact:
                 break
@@ -447,7 +450,28 @@ def _reach_sweeps(
 
 
 _FIRST_EVALUATION = 16
-"""Sweeps before the first strategy iteration (then after 32, 64, ... sweeps)."""
+"""Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
+
+_CREEP_SWEEPS = 1000
+"""Projected sweeps to the tolerance beyond which value iteration counts as creeping."""
+
+
+def _creeping(history: list[float], tol: float) -> bool:
+    """Whether the sweeps would take more than ``max(4 k, _CREEP_SWEEPS)`` more sweeps
+    to reach ``tol`` at the rate of the last ``k / 2`` of ``k`` sweeps (geometric
+    extrapolation of the residuals). Only decides *when* to run strategy iteration;
+    the values are sound either way."""
+    k = len(history)
+    if k < 2:
+        return False
+    now, then = history[-1], history[k // 2 - 1]
+    if now < tol:
+        return False
+    if now >= then:
+        return True
+    rate = (now / then) ** (1.0 / (k - k // 2))
+    return np.log(tol / now) / np.log(rate) > max(4 * k, _CREEP_SWEEPS)
+
 
 _MAX_IMPROVEMENTS = 100
 """Strategy improvement rounds per strategy iteration."""
