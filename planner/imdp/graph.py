@@ -218,15 +218,27 @@ def _attractor(
 
     Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
     entry into the states added by the previous layer, so the whole attractor costs
-    ``O(entries)`` plus ``O(rows)`` per layer.
+    ``O(entries of the candidate rows)`` plus ``O(k + rows / 64)`` per layer (``k``: the
+    entries into the layer).
     """
     m = model
     x = start.copy()
     choice = np.full(m.n_states, -1, dtype=np.int64)
-    inside = x[m.successor]
-    must = _row_any(m, (m.lower > 0) & inside)
-    touches = _row_any(m, inside & (m.upper > 0))
-    outside_up = _row_sum(m, np.where(inside, 0.0, m.upper))
+    cand_idx = np.flatnonzero(cand_rows)
+    must = np.zeros(m.n_rows, dtype=bool)
+    touches = np.zeros(m.n_rows, dtype=bool)
+    outside_up = np.zeros(m.n_rows)
+    if cand_idx.size == 0:
+        return x, choice
+    starts = m.row_ptr[cand_idx]
+    lens = m.row_ptr[cand_idx + 1] - starts
+    local = np.concatenate(([0], np.cumsum(lens)[:-1]))
+    ent = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(starts - local, lens)
+    inside = x[m.successor[ent]]
+    er0 = m.entry_row[ent]
+    must[er0[(m.lower[ent] > 0) & inside]] = True
+    touches[er0[inside & (m.upper[ent] > 0)]] = True
+    outside_up[cand_idx] = np.add.reduceat(np.where(inside, 0.0, m.upper[ent]), local)
     limit = 1.0 - m.tolerance
     check = np.flatnonzero(cand_rows & (must | touches))
     while check.size:
@@ -244,10 +256,10 @@ def _attractor(
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
+        np.subtract.at(outside_up, er, m.upper[e])
         mark = np.zeros(m.n_rows, dtype=bool)
         mark[er] = True
         rows = np.flatnonzero(mark)
-        outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
         check = rows[cand_rows[rows]]
     return x, choice
 
