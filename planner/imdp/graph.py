@@ -211,6 +211,15 @@ def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
     return entries[np.arange(total) + offs]
 
 
+def _entries_of(model: IMDP, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Entry indices of ``rows`` (row after row) and each row's first position in them."""
+    starts = model.row_ptr[rows]
+    lens = model.row_ptr[rows + 1] - starts
+    local = np.concatenate(([0], np.cumsum(lens)[:-1])).astype(np.int64)
+    ent = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(starts - local, lens)
+    return ent, local
+
+
 def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -230,10 +239,7 @@ def _attractor(
     outside_up = np.zeros(m.n_rows)
     if cand_idx.size == 0:
         return x, choice
-    starts = m.row_ptr[cand_idx]
-    lens = m.row_ptr[cand_idx + 1] - starts
-    local = np.concatenate(([0], np.cumsum(lens)[:-1]))
-    ent = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(starts - local, lens)
+    ent, local = _entries_of(m, cand_idx)
     inside = x[m.successor[ent]]
     er0 = m.entry_row[ent]
     must[er0[(m.lower[ent] > 0) & inside]] = True
@@ -253,14 +259,15 @@ def _attractor(
         choice[new] = ok[first]
         x[new] = True
         e = _gather_incoming(m, new)
+        e = e[cand_rows[m.entry_row[e]]]
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
-        np.subtract.at(outside_up, er, m.upper[e])
         mark = np.zeros(m.n_rows, dtype=bool)
         mark[er] = True
-        rows = np.flatnonzero(mark)
-        check = rows[cand_rows[rows]]
+        check = np.flatnonzero(mark)
+        up = np.bincount(np.searchsorted(check, er), weights=m.upper[e], minlength=check.size)
+        outside_up[check] -= up
     return x, choice
 
 
@@ -290,7 +297,13 @@ def robust_almost_sure_reach(
     if avoid is not None:
         u &= ~np.asarray(avoid, dtype=bool) | target
     while True:
-        cand = rows & u[model.row_state] & ~target[model.row_state] & stays_in(model, u)
+        # rows of U that cannot leave U (only their entries are read: U shrinks)
+        rows_u = np.flatnonzero(rows & u[model.row_state] & ~target[model.row_state])
+        cand = np.zeros(model.n_rows, dtype=bool)
+        if rows_u.size:
+            ent, local = _entries_of(model, rows_u)
+            leaves = (model.upper[ent] > 0) & ~u[model.successor[ent]]
+            cand[rows_u[~np.logical_or.reduceat(leaves, local)]] = True
         x, choice = _attractor(model, target & u, cand)
         x &= u
         if np.array_equal(x, u):

@@ -20,7 +20,7 @@ for reachability (iterating from below) the residual is the usual, not a guarant
 
 Reachability sweeps are Gauss-Seidel over layers of graph distance to the value-1 states
 and use :meth:`OrderingAdversary.lower_bound` (no sorting) between order refreshes every
-8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
+32 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
 fixed point, so zero lower bounds and end components stay safe; the last sweeps use the
 exact order (see ``_reach_sweeps``).
 
@@ -400,7 +400,7 @@ def _reach_sweeps(
     value-1 states (targets, and states of worst-case value 1), each layer with the values
     just computed for the layers before it, so one sweep carries a value across the whole
     model. Sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting; the order is
-    refreshed every 8 sweeps); each update is ``max(old, new)``. Starting from
+    refreshed every 32 sweeps); each update is ``max(old, new)``. Starting from
     ``V_0 <= T(V_0)``, every update stays below the least fixed point and the values only
     increase, which is what makes zero lower bounds and end components safe. Once a sweep
     changes no value by ``tolerance`` or more, sweeps use the exact order until one again
@@ -427,7 +427,7 @@ def _reach_sweeps(
         lrs = m.row_state[lr]
         seg = first_of_runs(lrs)
         layers.append((OrderingAdversary(m, adversary_minimizes, rows=lr), seg, lrs[seg]))
-    refresh = 8
+    refresh = _REFRESH
     residual = 0.0
     it = 0
     exact = False
@@ -467,6 +467,9 @@ def _reach_sweeps(
             exact = True
     return v, residual, it, sigma
 
+
+_REFRESH = 32
+"""Sweeps between refreshes of the layers' adversary orders."""
 
 _FIRST_EVALUATION = 16
 """Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
