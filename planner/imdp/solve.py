@@ -226,6 +226,8 @@ class Solution:
             states, states settled by graph analysis and states without allowed actions).
         residual: the last ``max |V_k - V_{k-1}|`` (a sweep with the exact order).
         iterations: the number of sweeps.
+        evaluations: the number of exact strategy evaluations by strategy iteration
+            (each: one or more sparse linear solves; 0 when the sweeps did not creep).
         converged: whether ``residual < tolerance``.
         fixed: ``(n_states,)`` mask of the states whose value was set without iteration.
         q_values: ``(n_rows,)`` robust value of every row under the final values
@@ -237,6 +239,7 @@ class Solution:
     residual: float
     iterations: int
     converged: bool = True
+    evaluations: int = 0
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     _q: Callable[[], np.ndarray] | None = field(default=None, repr=False)
     _q_cache: np.ndarray | None = field(default=None, repr=False)
@@ -314,8 +317,9 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         resort_tolerance=0.0 if reward is None else alg.tolerance * 1e-2,
     )
     sigma: np.ndarray | None = None
+    evaluations = 0
     if reward is None:
-        v, residual, it, sigma = _reach_sweeps(
+        v, residual, it, sigma, evaluations = _reach_sweeps(
             m, free_rows, fixed_val, adversary_minimizes, maximize, alg
         )
     else:
@@ -359,6 +363,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         iterations=it,
         converged=bool(residual < alg.tolerance),
         fixed=fixed,
+        evaluations=evaluations,
         _q=all_q,
     )
 
@@ -406,12 +411,12 @@ def _reach_sweeps(
     changes no value by ``tolerance`` or more, sweeps use the exact order until one again
     changes none by that much; that change is the reported residual.
 
-    Returns ``(values, residual, sweeps, strategy)``: ``strategy`` is the last strategy
+    Returns ``(values, residual, sweeps, strategy, evaluations)``: ``strategy`` is the last strategy
     iteration's optimal strategy (one row per free state) or ``None``.
     """
     v = fixed_val.copy()
     if free_rows.size == 0:
-        return v, 0.0, 0, None
+        return v, 0.0, 0, None, 0
     rs = m.row_state[free_rows]
     dist = _layers(m, free_rows, fixed_val == 1.0)
     dist = np.where(np.isfinite(dist), dist, np.inf)
@@ -434,14 +439,16 @@ def _reach_sweeps(
     use_si = maximize and alg.strategy_iteration
     next_eval = _FIRST_EVALUATION if use_si else alg.max_iterations
     sigma: np.ndarray | None = None
+    evaluations = 0
     history: list[float] = []
     while it < alg.max_iterations:
         if it >= next_eval:
             next_eval *= 2
             if _creeping(history, alg.tolerance):
-                x, sigma = _strategy_iteration(
+                x, sigma, rounds = _strategy_iteration(
                     m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
                 )
+                evaluations += rounds
                 if x is not None:
                     v = np.maximum(v, x)
                     for adv, _, _ in layers:
@@ -465,7 +472,7 @@ def _reach_sweeps(
             if exact:
                 break
             exact = True
-    return v, residual, it, sigma
+    return v, residual, it, sigma, evaluations
 
 
 _REFRESH = 32
@@ -506,13 +513,14 @@ def _strategy_iteration(
     fixed_val: np.ndarray,
     adversary_minimizes: bool,
     tol: float,
-) -> tuple[np.ndarray | None, np.ndarray | None]:
+) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Robust strategy iteration for maximal reachability, started from the strategy
     greedy for ``v``.
 
-    Returns ``(values, strategy)``: ``V_sigma`` of the last strategy evaluated (``None``
-    if the first evaluation gave up), and that strategy (one row per free state) if no
-    state wanted to switch any more, else ``None``.
+    Returns ``(values, strategy, evaluations)``: ``V_sigma`` of the last strategy
+    evaluated (``None`` if the first evaluation gave up), that strategy (one row per free
+    state) if no state wanted to switch any more, else ``None``, and the number of
+    strategies evaluated.
 
     Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
     best response included) and switches a state to its best row only where that row's
@@ -531,21 +539,21 @@ def _strategy_iteration(
     sigma = choice[rs[seg]]
     slack = tol * 1e-2
     best: np.ndarray | None = None
-    for _ in range(_MAX_IMPROVEMENTS):
+    for rounds in range(1, _MAX_IMPROVEMENTS + 1):
         x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, v)
         if x is None:
-            return best, None
+            return best, None, rounds
         best = x
         q = full.expectation(x)
         q_best = np.maximum.reduceat(q, seg)
         q_sigma = q[np.searchsorted(free_rows, sigma)]
         better = q_best > q_sigma + slack
         if not better.any():
-            return best, sigma
+            return best, sigma, rounds
         top = np.flatnonzero(q >= q_best[seg_id])
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
-    return best, None
+    return best, None, _MAX_IMPROVEMENTS
 
 
 def _strategy(
