@@ -227,7 +227,7 @@ def _attractor(
 
     Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
     entry into the states added by the previous layer, so the whole attractor costs
-    ``O(entries of the candidate rows)`` plus ``O(k + rows / 64)`` per layer (``k``: the
+    ``O(entries of the candidate rows)`` plus ``O(k + rows)`` per layer (``k``: the
     entries into the layer).
     """
     m = model
@@ -266,8 +266,7 @@ def _attractor(
         mark = np.zeros(m.n_rows, dtype=bool)
         mark[er] = True
         check = np.flatnonzero(mark)
-        up = np.bincount(np.searchsorted(check, er), weights=m.upper[e], minlength=check.size)
-        outside_up[check] -= up
+        outside_up[check] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[check]
     return x, choice
 
 
