@@ -528,7 +528,9 @@ def _strategy_iteration(
     are strict, ``V_sigma`` never decreases and no new end component can trap mass that
     had a positive value; when no state switches, ``V_sigma`` is a fixed point of the
     Bellman operator (within the slack) and, being a strategy's value, at most the least
-    fixed point: it *is* the least fixed point.
+    fixed point: it *is* the least fixed point. With a cooperating adversary each round
+    evaluates the chain of ``sigma`` and the adversary greedy for the last values (a
+    lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
@@ -540,16 +542,19 @@ def _strategy_iteration(
     slack = tol * 1e-2
     best: np.ndarray | None = None
     for rounds in range(1, _MAX_IMPROVEMENTS + 1):
-        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, v)
+        start = v if best is None else best
+        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start)
         if x is None:
             return best, None, rounds
-        best = x
+        best = x if best is None else np.maximum(best, x)
         q = full.expectation(x)
         q_best = np.maximum.reduceat(q, seg)
         q_sigma = q[np.searchsorted(free_rows, sigma)]
         better = q_best > q_sigma + slack
         if not better.any():
-            return best, sigma, rounds
+            # a cooperating adversary is only evaluated for one order (a lower bound), so
+            # only the opposing adversary's case yields an exactly evaluated strategy
+            return best, (sigma if adversary_minimizes else None), rounds
         top = np.flatnonzero(q >= q_best[seg_id])
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
