@@ -244,8 +244,14 @@ def test_strategy_iteration_from_the_first_sweep_matches_reference(zero_lower, m
 
 def test_creeping_detection():
     creeping = solve_module._creeping
-    assert not creeping([0.5], 1e-8)
-    assert creeping([1e-6] * 16, 1e-8)  # no progress
-    assert creeping([1e-6 * 0.9999**k for k in range(16)], 1e-8)
-    assert not creeping([0.5**k for k in range(16)], 1e-8)
-    assert not creeping([1.0] * 15 + [1e-9], 1e-8)  # already below the tolerance
+
+    def fresh(residuals):  # residuals of the sweeps 8, 16, 24, ...
+        return [(8 * (k + 1), r) for k, r in enumerate(residuals)]
+
+    assert not creeping(fresh([0.5]), 1e-8)
+    assert creeping(fresh([1e-6, 1e-6]), 1e-8)  # no progress
+    assert creeping(fresh([1e-6, 1e-6 * 0.9999**8]), 1e-8)
+    assert not creeping(fresh([0.5**8, 0.5**16]), 1e-8)
+    assert not creeping(fresh([1.0, 1e-9]), 1e-8)  # already below the tolerance
+    # the rate is taken since sweep k / 2: 16 -> 32 here
+    assert not creeping(fresh([1.0, 1e-3, 1e-3, 1e-3 * 0.5**16]), 1e-8)
