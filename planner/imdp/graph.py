@@ -211,6 +211,15 @@ def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
     return entries[np.arange(total) + offs]
 
 
+def _entries_of(model: IMDP, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Entry indices of ``rows`` (row after row) and each row's first position in them."""
+    starts = model.row_ptr[rows]
+    lens = model.row_ptr[rows + 1] - starts
+    local = np.concatenate(([0], np.cumsum(lens)[:-1])).astype(np.int64)
+    ent = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(starts - local, lens)
+    return ent, local
+
+
 def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -218,15 +227,24 @@ def _attractor(
 
     Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
     entry into the states added by the previous layer, so the whole attractor costs
-    ``O(entries)`` plus ``O(rows)`` per layer.
+    ``O(entries of the candidate rows)`` plus ``O(k + rows)`` per layer (``k``: the
+    entries into the layer).
     """
     m = model
     x = start.copy()
     choice = np.full(m.n_states, -1, dtype=np.int64)
-    inside = x[m.successor]
-    must = _row_any(m, (m.lower > 0) & inside)
-    touches = _row_any(m, inside & (m.upper > 0))
-    outside_up = _row_sum(m, np.where(inside, 0.0, m.upper))
+    cand_idx = np.flatnonzero(cand_rows)
+    must = np.zeros(m.n_rows, dtype=bool)
+    touches = np.zeros(m.n_rows, dtype=bool)
+    outside_up = np.zeros(m.n_rows)
+    if cand_idx.size == 0:
+        return x, choice
+    ent, local = _entries_of(m, cand_idx)
+    inside = x[m.successor[ent]]
+    er0 = m.entry_row[ent]
+    must[er0[(m.lower[ent] > 0) & inside]] = True
+    touches[er0[inside & (m.upper[ent] > 0)]] = True
+    outside_up[cand_idx] = np.add.reduceat(np.where(inside, 0.0, m.upper[ent]), local)
     limit = 1.0 - m.tolerance
     check = np.flatnonzero(cand_rows & (must | touches))
     while check.size:
@@ -241,14 +259,14 @@ def _attractor(
         choice[new] = ok[first]
         x[new] = True
         e = _gather_incoming(m, new)
+        e = e[cand_rows[m.entry_row[e]]]
         er = m.entry_row[e]
         must[er[m.lower[e] > 0]] = True
         touches[er[m.upper[e] > 0]] = True
         mark = np.zeros(m.n_rows, dtype=bool)
         mark[er] = True
-        rows = np.flatnonzero(mark)
-        outside_up[rows] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[rows]
-        check = rows[cand_rows[rows]]
+        check = np.flatnonzero(mark)
+        outside_up[check] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[check]
     return x, choice
 
 
@@ -278,7 +296,13 @@ def robust_almost_sure_reach(
     if avoid is not None:
         u &= ~np.asarray(avoid, dtype=bool) | target
     while True:
-        cand = rows & u[model.row_state] & ~target[model.row_state] & stays_in(model, u)
+        # rows of U that cannot leave U (only their entries are read: U shrinks)
+        rows_u = np.flatnonzero(rows & u[model.row_state] & ~target[model.row_state])
+        cand = np.zeros(model.n_rows, dtype=bool)
+        if rows_u.size:
+            ent, local = _entries_of(model, rows_u)
+            leaves = (model.upper[ent] > 0) & ~u[model.successor[ent]]
+            cand[rows_u[~np.logical_or.reduceat(leaves, local)]] = True
         x, choice = _attractor(model, target & u, cand)
         x &= u
         if np.array_equal(x, u):

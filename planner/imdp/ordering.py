@@ -112,6 +112,7 @@ class OrderingAdversary:
         self._gap = m.upper[entries] - self._lower
         self._pos = np.arange(entries.size, dtype=np.int64) - self._row_ptr[self._entry_row]
         lens = np.diff(self._row_ptr)
+        self._lens = lens
         self._max_len = int(lens.max()) if lens.size else 0
         self._remaining = 1.0 - m.row_lower_sum[self.rows]
         self._perm: np.ndarray | None = None
@@ -119,7 +120,6 @@ class OrderingAdversary:
         self._prob = np.empty(entries.size, dtype=np.float64)
         self._matrix: sp.csr_matrix | None = None
         self._crit_succ = np.zeros(self.n_rows, dtype=np.int64)
-        self._lower_matrix: sp.csr_matrix | None = None
         self.n_sorts = 0
         """How many times rows were (re-)sorted (a full sort counts once)."""
 
@@ -213,14 +213,17 @@ class OrderingAdversary:
         assert self._matrix is not None
         if not self.minimize:
             return self._matrix @ values
-        if self._lower_matrix is None:
-            self._lower_matrix = sp.csr_matrix(
-                (self._lower, self._successor, self._row_ptr), shape=self._matrix.shape
-            )
+        if self.n_rows == 0:
+            return np.zeros(0)
         t = values[self._crit_succ]
-        short = np.maximum(t[self._entry_row] - values[self._successor], 0.0)
-        penalty = np.bincount(self._entry_row, weights=self._gap * short, minlength=self.n_rows)
-        return self._lower_matrix @ values + self._remaining * t - penalty
+        vs = values[self._successor]
+        # per entry: l_j v_j - (u_j - l_j) max(t - v_j, 0), summed per row
+        short = np.repeat(t, self._lens) - vs
+        np.maximum(short, 0.0, out=short)
+        short *= self._gap
+        vs *= self._lower
+        vs -= short
+        return np.add.reduceat(vs, self._row_ptr[:-1]) + self._remaining * t
 
 
 def worst_case_expectation(model: IMDP, values: np.ndarray) -> np.ndarray:

@@ -23,6 +23,19 @@ and use :meth:`OrderingAdversary.lower_bound` (no sorting) between order refresh
 8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
 fixed point, so zero lower bounds and end components stay safe; the last sweeps use the
 exact order (see ``_reach_sweeps``).
+
+Where mass leaks slowly out of near-end-components the sweeps from below creep (the
+residual can stay near ``1e-8`` per sweep while the values are still far from the fixed
+point, so the residual rule alone would stop early or after millions of sweeps). For
+maximal reachability (at most 20,000 free states, as its LU solves can fill in) the
+sweeps therefore check, after 16, 32, 64, ... sweeps, whether the
+residuals extrapolate to more than ``max(4 k, 1000)`` further sweeps, and if so run robust
+strategy iteration: the strategy is evaluated exactly against the adversary's best
+response (:mod:`planner.imdp.evaluate`: sparse solves, adversary policy iteration) and
+improved only where a row is strictly better. Its values are a strategy's values, hence at
+most the least fixed point and ``<= T(V)``, so the sweeps continue from ``max(V, V_sigma)``
+soundly; when no state switches they are the least fixed point and the sweeps only
+confirm the residual. The reported ``iterations`` count sweeps only.
 """
 
 from __future__ import annotations
@@ -36,6 +49,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
+from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
@@ -183,12 +197,18 @@ class ValueIteration:
         precompute: settle the states of (worst- or best-case) reachability probability
             0 and (worst case) 1 by graph analysis before iterating (default). Without it
             the iteration alone approaches the same least fixed point, more slowly.
+        strategy_iteration: for maximal reachability, switch to robust strategy
+            iteration (exact sparse evaluation of a strategy against the adversary's best
+            response, then strict improvements) when the sweeps creep towards the
+            tolerance (default). Without it plain sweeps can take millions of sweeps where
+            mass leaks slowly out of near-end-components.
     """
 
     tolerance: float = 1e-8
     max_iterations: int = 1_000_000
     callback: Callable[[int, float], None] | None = None
     precompute: bool = True
+    strategy_iteration: bool = True
 
     def __post_init__(self) -> None:
         if not self.tolerance > 0:
@@ -207,6 +227,8 @@ class Solution:
             states, states settled by graph analysis and states without allowed actions).
         residual: the last ``max |V_k - V_{k-1}|`` (a sweep with the exact order).
         iterations: the number of sweeps.
+        evaluations: the number of exact strategy evaluations by strategy iteration
+            (each: one or more sparse linear solves; 0 when the sweeps did not creep).
         converged: whether ``residual < tolerance``.
         fixed: ``(n_states,)`` mask of the states whose value was set without iteration.
         q_values: ``(n_rows,)`` robust value of every row under the final values
@@ -218,6 +240,7 @@ class Solution:
     residual: float
     iterations: int
     converged: bool = True
+    evaluations: int = 0
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     _q: Callable[[], np.ndarray] | None = field(default=None, repr=False)
     _q_cache: np.ndarray | None = field(default=None, repr=False)
@@ -294,8 +317,12 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         rows=free_rows,
         resort_tolerance=0.0 if reward is None else alg.tolerance * 1e-2,
     )
+    sigma: np.ndarray | None = None
+    evaluations = 0
     if reward is None:
-        v, residual, it = _reach_sweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+        v, residual, it, sigma, evaluations = _reach_sweeps(
+            m, free_rows, fixed_val, adversary_minimizes, maximize, alg
+        )
     else:
         v, residual, it = fixed_val.copy(), 0.0, 0
         while free_rows.size and it < alg.max_iterations:
@@ -315,6 +342,9 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
                 full.resort_tolerance = 0.0
     q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
+    if sigma is not None:
+        # strategy iteration's strategy: its exact value is the least fixed point
+        strategy[seg_states] = m.row_action[sigma]
     if isinstance(prop, ReachAvoid) and maximize and pessimistic:
         strategy = np.where(prob1 & (prob1_choice >= 0), m.row_action[prob1_choice], strategy)
     final_v = backup(v)
@@ -334,6 +364,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         iterations=it,
         converged=bool(residual < alg.tolerance),
         fixed=fixed,
+        evaluations=evaluations,
         _q=all_q,
     )
 
@@ -381,11 +412,12 @@ def _reach_sweeps(
     changes no value by ``tolerance`` or more, sweeps use the exact order until one again
     changes none by that much; that change is the reported residual.
 
-    Returns ``(values, residual, sweeps)``.
+    Returns ``(values, residual, sweeps, strategy, evaluations)``: ``strategy`` is the last strategy
+    iteration's optimal strategy (one row per free state) or ``None``.
     """
     v = fixed_val.copy()
     if free_rows.size == 0:
-        return v, 0.0, 0
+        return v, 0.0, 0, None, 0
     rs = m.row_state[free_rows]
     dist = _layers(m, free_rows, fixed_val == 1.0)
     dist = np.where(np.isfinite(dist), dist, np.inf)
@@ -401,11 +433,32 @@ def _reach_sweeps(
         lrs = m.row_state[lr]
         seg = first_of_runs(lrs)
         layers.append((OrderingAdversary(m, adversary_minimizes, rows=lr), seg, lrs[seg]))
-    refresh = 8
+    refresh = _REFRESH
     residual = 0.0
     it = 0
     exact = False
+    use_si = (
+        maximize
+        and alg.strategy_iteration
+        and free_rows.size
+        and (np.unique(m.row_state[free_rows]).size <= _SI_MAX_STATES)
+    )
+    next_eval = _FIRST_EVALUATION if use_si else alg.max_iterations
+    sigma: np.ndarray | None = None
+    evaluations = 0
+    history: list[tuple[int, float]] = []  # (sweep, residual) of sweeps with a fresh order
     while it < alg.max_iterations:
+        if it >= next_eval:
+            next_eval *= 2
+            if _creeping(history, alg.tolerance):
+                x, sigma, rounds = _strategy_iteration(
+                    m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+                )
+                evaluations += rounds
+                if x is not None:
+                    v = np.maximum(v, x)
+                    for adv, _, _ in layers:
+                        adv.update(v)
         it += 1
         residual = 0.0
         for adv, seg, states in layers:
@@ -420,11 +473,106 @@ def _reach_sweeps(
             v[states] = new
         if alg.callback is not None:
             alg.callback(it, residual)
+        if exact or it % refresh == 0:
+            history.append((it, residual))
         if residual < alg.tolerance:
             if exact:
                 break
             exact = True
-    return v, residual, it
+    return v, residual, it, sigma, evaluations
+
+
+_REFRESH = 8
+"""Sweeps between refreshes of the layers' adversary orders."""
+
+_SI_MAX_STATES = 20_000
+"""Strategy iteration only for at most this many free states: its sparse LU solves can
+fill in badly on large unstructured graphs (a 3000-state random model: ~0.5 s each)."""
+
+_FIRST_EVALUATION = 16
+"""Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
+
+_CREEP_SWEEPS = 1000
+"""Projected sweeps to the tolerance beyond which value iteration counts as creeping."""
+
+
+def _creeping(history: list[tuple[int, float]], tol: float) -> bool:
+    """Whether, after ``k`` sweeps, the sweeps would take more than
+    ``max(4 k, _CREEP_SWEEPS)`` more sweeps to reach ``tol`` at the rate seen since sweep
+    ``k / 2`` (geometric extrapolation of the residuals of the sweeps with a fresh order,
+    given as ``(sweep, residual)``; stale-order sweeps can stall on a plateau below the
+    values). Only decides *when* to run strategy iteration; the values are sound either
+    way."""
+    if len(history) < 2:
+        return False
+    k, now = history[-1]
+    earlier = [h for h in history[:-1] if h[0] <= k // 2] or history[:1]
+    k0, then = earlier[-1]
+    if now < tol:
+        return False
+    if now >= then:
+        return True
+    rate = (now / then) ** (1.0 / (k - k0))
+    return np.log(tol / now) / np.log(rate) > max(4 * k, _CREEP_SWEEPS)
+
+
+_MAX_IMPROVEMENTS = 100
+"""Strategy improvement rounds per strategy iteration."""
+
+
+def _strategy_iteration(
+    m: IMDP,
+    free_rows: np.ndarray,
+    v: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    tol: float,
+) -> tuple[np.ndarray | None, np.ndarray | None, int]:
+    """Robust strategy iteration for maximal reachability, started from the strategy
+    greedy for ``v``.
+
+    Returns ``(values, strategy, evaluations)``: ``V_sigma`` of the last strategy
+    evaluated (``None`` if the first evaluation gave up), that strategy (one row per free
+    state) if no state wanted to switch any more, else ``None``, and the number of
+    strategies evaluated.
+
+    Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
+    best response included) and switches a state to its best row only where that row's
+    robust value exceeds the current row's by more than ``tol / 100``. Because switches
+    are strict, ``V_sigma`` never decreases and no new end component can trap mass that
+    had a positive value; when no state switches, ``V_sigma`` is a fixed point of the
+    Bellman operator (within the slack) and, being a strategy's value, at most the least
+    fixed point: it *is* the least fixed point. With a cooperating adversary each round
+    evaluates the chain of ``sigma`` and the adversary greedy for the last values (a
+    lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
+    """
+    rs = m.row_state[free_rows]
+    seg = first_of_runs(rs)
+    seg_id = np.cumsum(np.concatenate(([0], (rs[1:] != rs[:-1]).astype(np.int64))))
+    full = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
+    q = full.expectation(v)
+    choice = _strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
+    sigma = choice[rs[seg]]
+    slack = tol * 1e-2
+    best: np.ndarray | None = None
+    for rounds in range(1, _MAX_IMPROVEMENTS + 1):
+        start = v if best is None else best
+        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start)
+        if x is None:
+            return best, None, rounds
+        best = x if best is None else np.maximum(best, x)
+        q = full.expectation(x)
+        q_best = np.maximum.reduceat(q, seg)
+        q_sigma = q[np.searchsorted(free_rows, sigma)]
+        better = q_best > q_sigma + slack
+        if not better.any():
+            # a cooperating adversary is only evaluated for one order (a lower bound), so
+            # only the opposing adversary's case yields an exactly evaluated strategy
+            return best, (sigma if adversary_minimizes else None), rounds
+        top = np.flatnonzero(q >= q_best[seg_id])
+        top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
+        sigma = np.where(better, free_rows[top], sigma)
+    return best, None, _MAX_IMPROVEMENTS
 
 
 def _strategy(
@@ -438,7 +586,24 @@ def _strategy(
     prop: ReachAvoid | DiscountedReward,
     tol: float,
 ) -> np.ndarray:
-    """Memoryless strategy: an optimal row per free state (-1 elsewhere).
+    """Memoryless strategy: an optimal action per free state (-1 elsewhere)."""
+    reach_max = isinstance(prop, ReachAvoid) and maximize
+    choice = _strategy_rows(m, free_rows, q_free, seg, seg_states, v, maximize, reach_max, tol)
+    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
+
+
+def _strategy_rows(
+    m: IMDP,
+    free_rows: np.ndarray,
+    q_free: np.ndarray,
+    seg: np.ndarray,
+    seg_states: np.ndarray,
+    v: np.ndarray,
+    maximize: bool,
+    reach_max: bool,
+    tol: float,
+) -> np.ndarray:
+    """An optimal row per free state (-1 elsewhere).
 
     For maximal reachability, optimal rows are picked by a robust attractor from the
     states already settled (value fixed, or 0), so the strategy cannot idle inside an end
@@ -457,7 +622,7 @@ def _strategy(
     opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
     first = opt_local[first_of_runs(rs[opt_local])]
     choice[rs[first]] = free_rows[first]
-    if isinstance(prop, ReachAvoid) and maximize:
+    if reach_max:
         free = np.zeros(n, dtype=bool)
         free[seg_states] = True
         settled = ~free | (v <= 0)
@@ -465,4 +630,4 @@ def _strategy(
         cand[free_rows[opt_local]] = True
         _, attr = graph._attractor(m, settled, cand)
         choice = np.where((attr >= 0) & free, attr, choice)
-    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
+    return choice

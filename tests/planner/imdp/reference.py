@@ -105,3 +105,123 @@ def ref_discounted(
         if diff < 1e-13:
             break
     return np.array(v)
+
+
+def slow_leak_imdp(rng: np.random.Generator, n_states: int = 7, leak: float = 1e-5) -> IMDP:
+    """Random IMDP whose states keep ``1 - leak`` of their mass on themselves: value
+    iteration from 0 creeps up by about ``leak`` per sweep. State 0 is a sink, state 1 the
+    (absorbing) goal; the other states have two actions, each with a forced (``lower > 0``)
+    leak into the sink, so no state but the goal has value 1."""
+    s, a, t, lo, up = [0, 1], [0, 0], [0, 1], [1.0, 1.0], [1.0, 1.0]
+    for q in range(2, n_states):
+        for act in range(2):
+            others = [x for x in range(1, n_states) if x != q]
+            succ = np.concatenate(
+                ([0], rng.choice(others, size=int(rng.integers(1, 4)), replace=False))
+            )
+            p = rng.dirichlet(np.ones(succ.size)) * leak
+            lower = p * rng.uniform(0.3, 1.0, size=succ.size)
+            lower[1:][rng.random(succ.size - 1) < 0.4] = 0.0
+            upper = p * rng.uniform(1.0, 2.0, size=succ.size)
+            s += [q] * (succ.size + 1)
+            a += [act] * (succ.size + 1)
+            t += [*succ.tolist(), q]
+            lo += [*lower.tolist(), 1.0 - 3 * leak]
+            up += [*upper.tolist(), 1.0 - 0.5 * leak]
+    return IMDP(
+        n_states, s, a, t, lo, up, n_actions=2, labels=[(), ("goal",)] + [()] * (n_states - 2)
+    )
+
+
+def _robust_positive(rows: dict, target: np.ndarray, strategy: dict[int, int]) -> np.ndarray:
+    """States from which the strategy reaches ``target`` with positive probability under
+    every adversary (per-state fixpoint loop)."""
+    x = target.copy()
+    changed = True
+    while changed:
+        changed = False
+        for q, act in strategy.items():
+            if x[q]:
+                continue
+            row = rows[(q, act)]
+            forced = any(lo > 0 and x[j] for j, lo, _ in row)
+            out_up = sum(up for j, _, up in row if not x[j])
+            touches = any(up > 0 and x[j] for j, _, up in row)
+            if forced or (touches and out_up < 1.0 - 1e-12):
+                x[q] = True
+                changed = True
+    return x
+
+
+def ref_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, int]) -> np.ndarray:
+    """Worst-case reachability value of a memoryless strategy by linear programming.
+
+    After the states where the adversary forces probability 0 are set to 0, the value is
+    the greatest ``x`` with ``x_q <= min_p p . x`` for all strategy rows, written with the
+    dual of the inner minimum: ``x_q <= l . x + (1 - sum l) t_q - sum_j (u_j - l_j) mu_qj``,
+    ``mu_qj >= t_q - x_j``, ``mu >= 0``.
+    """
+    from scipy.optimize import linprog
+
+    rows = rows_of(model)
+    pos = _robust_positive(rows, target, strategy)
+    val = np.where(target, 1.0, 0.0)
+    live = [q for q in strategy if pos[q] and not target[q]]
+    if not live:
+        return val
+    xi = {q: k for k, q in enumerate(live)}
+    nx = len(live)
+    ti = {q: nx + k for k, q in enumerate(live)}
+    mu = {}
+    for q in live:
+        for j, _, _ in rows[(q, strategy[q])]:
+            mu[(q, j)] = 2 * nx + len(mu)
+    nv = 2 * nx + len(mu)
+    a_ub, b_ub = [], []
+    for q in live:
+        row = rows[(q, strategy[q])]
+        c = np.zeros(nv)
+        rhs = 0.0
+        c[xi[q]] += 1.0
+        c[ti[q]] -= 1.0 - sum(lo for _, lo, _ in row)
+        for j, lo, up in row:
+            if j in xi:
+                c[xi[j]] -= lo
+            else:
+                rhs += lo * val[j]
+            c[mu[(q, j)]] += up - lo
+            d = np.zeros(nv)
+            d[ti[q]] = 1.0
+            d[mu[(q, j)]] = -1.0
+            r2 = 0.0
+            if j in xi:
+                d[xi[j]] -= 1.0
+            else:
+                r2 = val[j]
+            a_ub.append(d)
+            b_ub.append(r2)
+        a_ub.append(c)
+        b_ub.append(rhs)
+    cost = np.zeros(nv)
+    cost[:nx] = -1.0
+    bounds = [(0.0, 1.0)] * nx + [(-1.0, 2.0)] * nx + [(0.0, None)] * len(mu)
+    res = linprog(cost, A_ub=np.array(a_ub), b_ub=np.array(b_ub), bounds=bounds, method="highs")
+    assert res.status == 0, res.message
+    val[live] = res.x[:nx]
+    return val
+
+
+def ref_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
+    """Worst-case maximal reachability as the best of all memoryless strategies' values
+    (:func:`ref_strategy_value`); no value iteration."""
+    from itertools import product as cartesian
+
+    rows = rows_of(model)
+    free = [q for q in range(model.n_states) if not target[q]]
+    choices = [sorted(a for (s, a) in rows if s == q) for q in free]
+    best = np.where(target, 1.0, 0.0)
+    for combo in cartesian(*choices):
+        best = np.maximum(
+            best, ref_strategy_value(model, target, dict(zip(free, combo, strict=True)))
+        )
+    return best

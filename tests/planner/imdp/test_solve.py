@@ -1,3 +1,4 @@
+import importlib
 from fractions import Fraction
 
 import numpy as np
@@ -13,7 +14,16 @@ from planner.imdp import (
     ValueIteration,
     solve,
 )
-from tests.planner.imdp.reference import random_imdp, ref_discounted, ref_reach
+from tests.planner.imdp.reference import (
+    random_imdp,
+    ref_discounted,
+    ref_reach,
+    ref_reach_by_strategies,
+    ref_strategy_value,
+    slow_leak_imdp,
+)
+
+solve_module = importlib.import_module("planner.imdp.solve")
 
 
 def reach(m, target, avoid=None, sat="pessimistic", strategy="maximize", **kw):
@@ -171,3 +181,77 @@ def test_specification_errors():
         Problem(m, Specification(ReachAvoid("g")), allowed=np.ones((2, 1), bool))
     with pytest.raises(SpecificationError, match="tolerance"):
         ValueIteration(tolerance=0)
+
+
+def test_slow_leak_closed_form():
+    # state 2 keeps 1 - 3e-7 .. 1 - 1e-7 on itself, exits to the goal (1) with
+    # [1e-7, 2e-7] and to the sink (0) with [0, 2e-7]: the worst case keeps the goal at
+    # 1e-7 and sends 2e-7 to the sink, V = 1e-7 / 3e-7 = 1/3; value iteration from 0
+    # alone would creep up by about 1e-7 per sweep.
+    m = IMDP(
+        3,
+        [0, 1, 2, 2, 2],
+        [0] * 5,
+        [0, 1, 1, 0, 2],
+        [1, 1, 1e-7, 0, 1 - 3e-7],
+        [1, 1, 2e-7, 2e-7, 1 - 1e-7],
+        labels=[(), ("g",), ()],
+    )
+    sol = solve(Problem(m, Specification(ReachAvoid("g"))))
+    assert sol.values[2] == pytest.approx(1 / 3, abs=1e-8)
+    assert sol.converged and sol.iterations < 1000 and sol.evaluations >= 1
+    # plain sweeps from 0 are nowhere near after as many sweeps
+    plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
+    slow = solve(Problem(m, Specification(ReachAvoid("g"))), plain)
+    assert slow.values[2] < 0.01 and not slow.converged and slow.evaluations == 0
+    best = solve(Problem(m, Specification(ReachAvoid("g"), "optimistic")))
+    assert best.values[2] == pytest.approx(1.0, abs=1e-8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_slow_leak_matches_strategy_enumeration(seed):
+    rng = np.random.default_rng(seed)
+    m = slow_leak_imdp(rng, n_states=7)
+    tgt = m.states_labelled("goal")
+    sol = solve(Problem(m, Specification(ReachAvoid("goal"))))
+    assert sol.converged and sol.iterations < 1000
+    assert sol.values == pytest.approx(ref_reach_by_strategies(m, tgt), abs=1e-7)
+    # the returned strategy achieves the values (its own worst case, by LP)
+    assert (sol.strategy[2:] >= 0).all()
+    strategy = {q: int(sol.strategy[q]) for q in range(2, m.n_states)}
+    assert ref_strategy_value(m, tgt, strategy) == pytest.approx(sol.values, abs=1e-7)
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_strategy_iteration_from_the_first_sweep_matches_reference(zero_lower, monkeypatch):
+    # strategy iteration after sweeps 1, 2, 4, ... (whatever the rate): same least fixed point
+    monkeypatch.setattr(solve_module, "_FIRST_EVALUATION", 1)
+    monkeypatch.setattr(solve_module, "_creeping", lambda history, tol: True)
+    rng = np.random.default_rng(31 if zero_lower else 32)
+    for _ in range(3):
+        m = random_imdp(rng, n_states=20, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+        for sat in ("pessimistic", "optimistic"):
+            got = reach(m, "goal", "bad", sat=sat)
+            ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic")
+            assert got.values == pytest.approx(ref, abs=1e-8)
+        plain = solve(
+            Problem(m, Specification(ReachAvoid("goal", "bad"))),
+            ValueIteration(1e-12, precompute=False),
+        )
+        assert plain.values == pytest.approx(ref_reach(m, tgt, avd & ~tgt, True), abs=1e-8)
+
+
+def test_creeping_detection():
+    creeping = solve_module._creeping
+
+    def fresh(residuals):  # residuals of the sweeps 8, 16, 24, ...
+        return [(8 * (k + 1), r) for k, r in enumerate(residuals)]
+
+    assert not creeping(fresh([0.5]), 1e-8)
+    assert creeping(fresh([1e-6, 1e-6]), 1e-8)  # no progress
+    assert creeping(fresh([1e-6, 1e-6 * 0.9999**8]), 1e-8)
+    assert not creeping(fresh([0.5**8, 0.5**16]), 1e-8)
+    assert not creeping(fresh([1.0, 1e-9]), 1e-8)  # already below the tolerance
+    # the rate is taken since sweep k / 2: 16 -> 32 here
+    assert not creeping(fresh([1.0, 1e-3, 1e-3, 1e-3 * 0.5**16]), 1e-8)

@@ -1,0 +1,132 @@
+"""Exact reachability values of a fixed strategy (policy evaluation by sparse solves).
+
+For a memoryless strategy ``sigma`` (one row per state) and a fixed adversary (one
+distribution ``P`` per row) the probability ``x`` of reaching the states of positive
+fixed value ``c`` (targets: ``c = 1``) is the *least* solution of ``x = P x + P c``: zero
+on the states that cannot reach them in the graph of ``P > 0``, and on the rest the unique
+solution of the non-singular system ``(I - P_SS) x_S = (P c)_S``.
+
+:func:`strategy_reach_value` computes ``V_sigma``, the value of ``sigma`` against the
+optimal adversary:
+
+* an adversary that *maximises* cooperates with the strategy, so the chain of
+  ``sigma`` and any one adversary is a lower bound of the (maximal) value;
+* an adversary that *minimises*: first the states where it can force probability 0
+  (graph analysis: outside the robust attractor of the targets under ``sigma``) get 0;
+  on the rest the minimising Bellman operator of ``sigma`` has a unique fixed point, which
+  adversary-side policy iteration reaches: evaluate the chain of the current adversary,
+  re-sort the ordering adversary for those values, repeat until the order stands.
+
+Both give values ``x`` with ``x <= T(x)`` and ``x`` at most the least fixed point of
+maximal reachability, so value iteration may continue from ``max(v, x)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order
+from scipy.sparse.linalg import spsolve
+
+from planner.imdp import graph
+from planner.imdp.model import IMDP
+from planner.imdp.ordering import OrderingAdversary
+
+ORDER_SLACK = 1e-13
+"""Successor values out of order by at most this much do not re-sort the adversary while
+it is improved: the accepted values are within ``ORDER_SLACK`` times the row length of
+``V_sigma`` (floating-point noise must not keep the adversary iteration going)."""
+
+
+def _reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
+    """States with a path (edges ``adj > 0``) to a seed, seeds included."""
+    k = adj.shape[0]
+    rev = (adj > 0).T.tocsr().astype(np.int8)
+    src = np.flatnonzero(seeds)
+    ext = sp.bmat(
+        [
+            [rev, sp.csr_matrix((k, 1), dtype=np.int8)],
+            [sp.csr_matrix((np.ones(src.size, np.int8), (np.zeros_like(src), src)), (1, k)), None],
+        ],
+        format="csr",
+    )
+    out = np.zeros(k + 1, dtype=bool)
+    out[breadth_first_order(ext, k, directed=True, return_predecessors=False)] = True
+    return out[:k]
+
+
+def chain_reach(matrix: sp.csr_matrix, states: np.ndarray, fixed_val: np.ndarray) -> np.ndarray:
+    """Least solution of ``x_s = sum_j matrix[i, j] x_j`` for ``s = states[i]``.
+
+    Args:
+        matrix: ``(len(states), n_states)`` distributions, one row per state of ``states``.
+        states: the states being solved for (sorted, distinct).
+        fixed_val: ``(n_states,)`` values of all other states (read only there).
+
+    Returns:
+        ``(n_states,)``: ``fixed_val`` outside ``states``, the reachability values on them.
+    """
+    base = np.asarray(fixed_val, dtype=np.float64).copy()
+    base[states] = 0.0
+    b = matrix @ base
+    inner = matrix[:, states].tocsr()
+    inner.eliminate_zeros()
+    live = np.flatnonzero(_reaching(inner, b > 0))
+    out = base
+    if live.size:
+        sub = inner[live][:, live]
+        a = (sp.identity(live.size, format="csc") - sub).tocsc()
+        out[states[live]] = np.clip(np.atleast_1d(spsolve(a, b[live])), 0.0, 1.0)
+    return out
+
+
+def strategy_reach_value(
+    model: IMDP,
+    rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    start: np.ndarray,
+    max_rounds: int = 50,
+) -> np.ndarray | None:
+    """``V_sigma`` of the strategy that plays ``rows`` (one row per free state, sorted).
+
+    Args:
+        model: the interval MDP.
+        rows: the strategy's row of every free state, in increasing order.
+        fixed_val: ``(n_states,)`` values of the states without a row in ``rows``
+            (``> 0`` marks the targets).
+        adversary_minimizes: the adversary's side (see the module docstring).
+        start: values that seed the adversary's order.
+        max_rounds: adversary improvement rounds before giving up.
+
+    Returns:
+        ``(n_states,)`` values, or ``None`` when the adversary did not settle within
+        ``max_rounds`` (no bound is then claimed).
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    states = model.row_state[rows]
+    fixed_val = np.asarray(fixed_val, dtype=np.float64)
+    if not adversary_minimizes:
+        adv = OrderingAdversary(model, False, rows=rows)
+        return chain_reach(adv.matrix(start), states, fixed_val)
+    row_mask = np.zeros(model.n_rows, dtype=bool)
+    row_mask[rows] = True
+    target = fixed_val > 0
+    target[states] = False
+    pos, _ = graph.robust_positive_reach(model, target, rows=row_mask)
+    keep = pos[states]
+    base = fixed_val.copy()
+    base[states] = 0.0
+    if not keep.any():
+        return base
+    rows, states = rows[keep], states[keep]
+    adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
+    x = np.where(pos, start, base)
+    for _ in range(max_rounds):
+        matrix = adv.matrix(x)
+        sorts = adv.n_sorts
+        x = chain_reach(matrix, states, base)
+        adv.update(x)
+        if adv.n_sorts == sorts:
+            return x
+    return None
