@@ -160,6 +160,9 @@ class NavigationRunner:
                     prior_reward=qs.prior_reward,
                 ),
             )
+        # torch/gpytorch start-up costs (seconds, once per process) out of the batch timings
+        with torch_threads(self.settings.torch_threads):
+            LandingErrorGP(self.settings.gp).warm_up()
         res = self.settings.map_resolution
         w = scenario.world
         self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
