@@ -28,6 +28,7 @@ see e.g. Somenzi & Bloem, "Efficient Büchi automata from LTL formulae", CAV 200
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
 
 from planner.ltl.boolean import cover
@@ -63,74 +64,57 @@ def _finish(op: str, items: set[Formula], unit: Formula) -> Formula:
     return Formula(op, tuple(sorted(items, key=Formula.sort_key)))
 
 
-def mk_and(*args: Formula) -> Formula:
+def _mk_junction(
+    op: str,
+    args: tuple[Formula, ...],
+    unit: Formula,
+    absorbing: Formula,
+    temporal: str,
+    mk_temporal: Callable[[Formula], Formula],
+) -> Formula:
+    """``&`` (unit true, absorbing false, ``X a & X b = X(a & b)``, ``G a & G b = G(a & b)``)
+    or, dually, ``|`` (unit false, absorbing true, X and F distribute)."""
+    mk = mk_and if op == "&" else mk_or
     items: set[Formula] = set()
     xs: list[Formula] = []
-    gs: list[Formula] = []
-    for a in _flat("&", args):
-        if a is FALSE:
-            return FALSE
-        if a is TRUE:
+    ts: list[Formula] = []
+    for a in _flat(op, args):
+        if a is absorbing:
+            return absorbing
+        if a is unit:
             continue
         if a.op == "X":
             xs.append(a.children[0])
-        elif a.op == "G":
-            gs.append(a.children[0])
+        elif a.op == temporal:
+            ts.append(a.children[0])
         else:
             items.add(a)
     if len(xs) > 1:
-        items.add(mk_X(mk_and(*xs)))
+        items.add(mk_X(mk(*xs)))
     elif xs:
         items.add(Formula("X", (xs[0],)))
-    if len(gs) > 1:
-        items.add(mk_G(mk_and(*gs)))
-    elif gs:
-        items.add(Formula("G", (gs[0],)))
-    if FALSE in items:
-        return FALSE
-    items.discard(TRUE)
+    if len(ts) > 1:
+        items.add(mk_temporal(mk(*ts)))
+    elif ts:
+        items.add(Formula(temporal, (ts[0],)))
+    if absorbing in items:
+        return absorbing
+    items.discard(unit)
     for a in items:
         n = _neg_literal(a)
         if n is not None and n in items:
-            return FALSE
-    if len(items) > 1 and any(a.op == "&" for a in items):
-        return mk_and(*items)
-    return _finish("&", items, TRUE)
+            return absorbing
+    if len(items) > 1 and any(a.op == op for a in items):
+        return mk(*items)
+    return _finish(op, items, unit)
+
+
+def mk_and(*args: Formula) -> Formula:
+    return _mk_junction("&", args, TRUE, FALSE, "G", mk_G)
 
 
 def mk_or(*args: Formula) -> Formula:
-    items: set[Formula] = set()
-    xs: list[Formula] = []
-    fs: list[Formula] = []
-    for a in _flat("|", args):
-        if a is TRUE:
-            return TRUE
-        if a is FALSE:
-            continue
-        if a.op == "X":
-            xs.append(a.children[0])
-        elif a.op == "F":
-            fs.append(a.children[0])
-        else:
-            items.add(a)
-    if len(xs) > 1:
-        items.add(mk_X(mk_or(*xs)))
-    elif xs:
-        items.add(Formula("X", (xs[0],)))
-    if len(fs) > 1:
-        items.add(mk_F(mk_or(*fs)))
-    elif fs:
-        items.add(Formula("F", (fs[0],)))
-    if TRUE in items:
-        return TRUE
-    items.discard(FALSE)
-    for a in items:
-        n = _neg_literal(a)
-        if n is not None and n in items:
-            return TRUE
-    if len(items) > 1 and any(a.op == "|" for a in items):
-        return mk_or(*items)
-    return _finish("|", items, FALSE)
+    return _mk_junction("|", args, FALSE, TRUE, "F", mk_F)
 
 
 def suffix_invariant(f: Formula) -> bool:
