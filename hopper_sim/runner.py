@@ -187,7 +187,7 @@ class NavigationRunner:
             err,
             reward=self.env.reward_table if self.learner is None else None,
             learner=self.learner,
-            initial_cell=int(self.grid.locate(np.asarray(self.scenario.start)[None])[0]),
+            initial_cell=self.scenario.start_cell,
             current_state=current,
             settings=self.synthesis_settings,
             previous=previous,
