@@ -1,0 +1,365 @@
+"""Compiled (numba) kernels for the sequential parts of robust value iteration.
+
+A Gauss-Seidel sweep is sequential by nature: every state's update reads the values that
+the states before it in the sweep have just written. Array operations can only do that
+layer by layer (Jacobi inside a layer); these kernels do it state by state.
+
+Layout (built by :class:`ReachSweeper`): the free states in sweep order, their rows
+(``state_rows[k]:state_rows[k + 1]`` are the rows of the ``k``-th state) and, per row, its
+entries ``row_ptr[r]:row_ptr[r + 1]`` with successor, lower bound and gap ``u - l``.  Each row
+remembers its critical successor (see :func:`_row_value`), so a row whose adversary
+choice still stands costs one pass and no sorting.
+
+The robust expectation of a row under the state-ordering adversary (Lahijanian et al. 2015):
+with the successors sorted so that the adversary's preferred ones come first, every
+successor gets its lower bound and the remaining mass ``1 - sum(l)`` is handed out in that
+order, at most ``u_j - l_j`` each.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.ordering import row_entries
+
+
+@numba.njit(cache=True, nogil=True)
+def _sorted_value(
+    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
+):
+    """The ordering adversary's expectation by sorting the row (an insertion sort into the
+    scratch arrays ``idx``/``keys``); records the row's critical entry in ``crit[r]``."""
+    n = b - a
+    for i in range(n):
+        k = sign * v[succ[a + i]]
+        j = i - 1
+        while j >= 0 and keys[j] > k:
+            keys[j + 1] = keys[j]
+            idx[j + 1] = idx[j]
+            j -= 1
+        keys[j + 1] = k
+        idx[j + 1] = a + i
+    left = remaining
+    q = 0.0
+    c = idx[n - 1]
+    found = False
+    for i in range(n):
+        e = idx[i]
+        add = gap[e] if gap[e] < left else left
+        if add < 0.0:
+            add = 0.0
+        if not found and add < gap[e]:
+            c = e
+            found = True
+        left -= add
+        q += (lower[e] + add) * keys[i]
+    crit[r] = c
+    return sign * q
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_value(
+    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
+):
+    """The ordering adversary's ``sum_j p_j v[succ_j]`` over the entries ``a:b``.
+
+    With keys ``k_j = sign * v[succ_j]`` (``sign = 1``: the minimising adversary) the
+    adversary gives every successor its lower bound and the remaining mass
+    ``rem = 1 - sum(l)`` to the smallest keys first. With ``t`` the key of the critical
+    successor (where the handed-out gaps reach ``rem``) that is
+
+        sum_j l_j k_j + rem t - sum_{k_j < t} (u_j - l_j) (t - k_j),
+
+    valid exactly when ``G(< t) <= rem <= G(<= t)`` (``G``: summed gaps). The row's
+    threshold from the last call is tried first (one pass, no sorting, no branches on the
+    values); if the new values moved it, the row is sorted.
+    """
+    if remaining > 0.0:
+        t = sign * v[succ[crit[r]]]
+        lv = 0.0
+        g_less = 0.0
+        g_eq = 0.0
+        short = 0.0
+        for i in range(a, b):
+            k = sign * v[succ[i]]
+            g = gap[i]
+            lv += lower[i] * k
+            d = t - k
+            below = d > 0.0
+            g_less += g if below else 0.0
+            short += g * d if below else 0.0
+            g_eq += g if d == 0.0 else 0.0
+        if g_less <= remaining and remaining <= g_less + g_eq:
+            return sign * (lv + remaining * t - short)
+    return _sorted_value(a, b, remaining, succ, lower, gap, v, sign, crit, r, idx, keys)
+
+
+@numba.njit(cache=True, nogil=True)
+def gauss_seidel_sweep(
+    states,
+    state_rows,
+    row_ptr,
+    remaining,
+    succ,
+    lower,
+    gap,
+    crit,
+    v,
+    best_row,
+    full,
+    maximize,
+    adversary_minimizes,
+) -> float:
+    """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
+    ``states`` in order, in place; returns ``max_s`` of the change.
+
+    ``opt`` is max (``maximize``) or min over the state's rows; the adversary minimises
+    (``adversary_minimizes``) or maximises. Each update reads the values written earlier in
+    the same sweep. ``full``: every row is evaluated and ``best_row[k]`` records the optimal
+    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: its
+    update is at most the full one). Iterating from below (``V_0 <= T(V_0)``) every update
+    is at most the least fixed point, so the values stay a sound lower bound.
+    """
+    sign = 1.0 if adversary_minimizes else -1.0
+    width = 0
+    for r in range(row_ptr.size - 1):
+        width = max(width, row_ptr[r + 1] - row_ptr[r])
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    residual = 0.0
+    for k in range(states.size):
+        s = states[k]
+        if full:
+            lo = state_rows[k]
+            hi = state_rows[k + 1]
+        else:
+            lo = best_row[k]
+            hi = lo + 1
+        best = -np.inf if maximize else np.inf
+        arg = lo
+        for r in range(lo, hi):
+            q = _row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                v,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if (q > best) if maximize else (q < best):
+                best = q
+                arg = r
+        if full:
+            best_row[k] = arg
+        old = v[s]
+        if best > old:
+            v[s] = best
+            if best - old > residual:
+                residual = best - old
+    return residual
+
+
+class ReachSweeper:
+    """The compact, sweep-ordered layout of the free rows of a model, and its sweeps.
+
+    Args:
+        model: the interval MDP.
+        free_rows: the rows the strategy may use at the free states (sorted).
+        sweep_key: ``(n_states,)`` sort key of the states; sweeps visit the free states in
+            increasing key (ties by index).
+        maximize: the strategy maximises (else minimises) over rows.
+        adversary_minimizes: the adversary minimises (else maximises) the expectation.
+    """
+
+    def __init__(
+        self,
+        model: IMDP,
+        free_rows: np.ndarray,
+        sweep_key: np.ndarray,
+        maximize: bool,
+        adversary_minimizes: bool,
+    ) -> None:
+        m = model
+        rs = m.row_state[free_rows]
+        order = np.lexsort((free_rows, sweep_key[rs]))
+        self._position = order
+        rows = free_rows[order]
+        rs = rs[order]
+        first = first_of_runs(rs)
+        self.rows = rows
+        """The original row index of every compact row, in sweep order."""
+        self.states = rs[first].astype(np.int64)
+        """The free states in sweep order."""
+        self.state_rows = np.append(first, rows.size).astype(np.int64)
+        ent = row_entries(m, rows)
+        lens = m.row_ptr[rows + 1] - m.row_ptr[rows]
+        self.row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
+        self.remaining = 1.0 - m.row_lower_sum[rows]
+        self.succ = m.successor[ent].astype(np.int64)
+        self.lower = m.lower[ent].astype(np.float64)
+        self.gap = m.upper[ent] - self.lower
+        self.crit = self.row_ptr[:-1].copy()
+        self.best_row = self.state_rows[:-1].copy()
+        self.maximize = bool(maximize)
+        self.adversary_minimizes = bool(adversary_minimizes)
+
+    def sweep(self, v: np.ndarray, full: bool = True) -> float:
+        """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`)."""
+        return float(
+            gauss_seidel_sweep(
+                self.states,
+                self.state_rows,
+                self.row_ptr,
+                self.remaining,
+                self.succ,
+                self.lower,
+                self.gap,
+                self.crit,
+                v,
+                self.best_row,
+                full,
+                self.maximize,
+                self.adversary_minimizes,
+            )
+        )
+
+    def row_values(self, v: np.ndarray) -> np.ndarray:
+        """The robust expectation of ``v`` for every free row, in the order of the
+        ``free_rows`` given to the constructor."""
+        q = all_row_values(
+            self.row_ptr,
+            self.remaining,
+            self.succ,
+            self.lower,
+            self.gap,
+            self.crit,
+            v,
+            self.adversary_minimizes,
+        )
+        out = np.empty_like(q)
+        out[self._position] = q
+        return out
+
+    def strategy_rows(self) -> np.ndarray:
+        """The original row of each free state that the last full sweep found optimal,
+        in increasing state order."""
+        chosen = self.rows[self.best_row]
+        return chosen[np.argsort(self.states)]
+
+
+@numba.njit(cache=True, nogil=True)
+def robust_attractor(
+    start, cand, row_state, row_ptr, successor, lower, upper, inc_ptr, inc_entries, entry_row, limit
+):
+    """The robust attractor of ``start`` with the candidate rows ``cand`` (work list).
+
+    A state joins when one of its candidate rows puts positive mass into the set under
+    every adversary: an entry with ``lower > 0`` into the set, or an ``upper > 0`` entry
+    into it while the upper bounds of the entries outside sum to less than ``limit``
+    (``1 - tolerance``). Each state that joins updates only the rows with an entry into it,
+    so the whole attractor costs ``O(entries of the candidate rows + their incoming
+    lists)``. Returns ``(mask, choice)``: ``choice[s]`` is the row by which ``s`` joined
+    (-1 for ``start`` and outside); a joining row only counts states that joined before.
+    """
+    n_rows = row_ptr.size - 1
+    x = start.copy()
+    choice = np.full(x.size, -1, dtype=np.int64)
+    must = np.zeros(n_rows, dtype=np.bool_)
+    touches = np.zeros(n_rows, dtype=np.bool_)
+    outside_up = np.zeros(n_rows)
+    queue = np.empty(x.size, dtype=np.int64)
+    tail = 0
+    for r in range(n_rows):
+        if not cand[r]:
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if x[successor[e]]:
+                if lower[e] > 0.0:
+                    must[r] = True
+                if upper[e] > 0.0:
+                    touches[r] = True
+            else:
+                outside_up[r] += upper[e]
+    for r in range(n_rows):
+        s = row_state[r]
+        if cand[r] and not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+            x[s] = True
+            choice[s] = r
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            e = inc_entries[k]
+            r = entry_row[e]
+            if not cand[r]:
+                continue
+            if lower[e] > 0.0:
+                must[r] = True
+            if upper[e] > 0.0:
+                touches[r] = True
+            outside_up[r] -= upper[e]
+            s = row_state[r]
+            if not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+                x[s] = True
+                choice[s] = r
+                queue[tail] = s
+                tail += 1
+    return x, choice
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
+    """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
+    successor lies in ``u``."""
+    n_rows = row_ptr.size - 1
+    out = np.zeros(n_rows, dtype=np.bool_)
+    for r in range(n_rows):
+        s = row_state[r]
+        if not rows[r] or not u[s] or exclude[s]:
+            continue
+        ok = True
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper[e] > 0.0 and not u[successor[e]]:
+                ok = False
+                break
+        out[r] = ok
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
+    """The adversary's expectation of ``v`` for every row of the layout."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    width = 0
+    for r in range(row_ptr.size - 1):
+        width = max(width, row_ptr[r + 1] - row_ptr[r])
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    out = np.empty(row_ptr.size - 1)
+    for r in range(row_ptr.size - 1):
+        out[r] = _row_value(
+            row_ptr[r],
+            row_ptr[r + 1],
+            remaining[r],
+            succ,
+            lower,
+            gap,
+            v,
+            sign,
+            crit,
+            r,
+            idx,
+            keys,
+        )
+    return out
