@@ -363,3 +363,50 @@ def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_mini
             keys,
         )
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def counting_order(keys, n_keys):
+    """Stable order of ``keys`` (integers in ``[0, n_keys)``) by counting sort, and the
+    start of each key's run: ``(order, ptr)``."""
+    ptr = np.zeros(n_keys + 1, dtype=np.int64)
+    for k in keys:
+        ptr[k + 1] += 1
+    for i in range(n_keys):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    order = np.empty(keys.size, dtype=np.int64)
+    for i in range(keys.size):
+        k = keys[i]
+        order[fill[k]] = i
+        fill[k] += 1
+    return order, ptr
+
+
+@numba.njit(cache=True, nogil=True)
+def backward_distance(sources, row_mask, row_state, upper, inc_ptr, inc_entries, entry_row):
+    """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
+    entries of the rows in ``row_mask`` (``inf`` where no path)."""
+    dist = np.full(sources.size, np.inf)
+    queue = np.empty(sources.size, dtype=np.int64)
+    tail = 0
+    for s in range(sources.size):
+        if sources[s]:
+            dist[s] = 0.0
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            e = inc_entries[k]
+            r = entry_row[e]
+            if not row_mask[r] or upper[e] <= 0.0:
+                continue
+            s = row_state[r]
+            if dist[s] == np.inf:
+                dist[s] = dist[t] + 1.0
+                queue[tail] = s
+                tail += 1
+    return dist

@@ -263,9 +263,9 @@ class IMDP:
         """Reverse index ``(ptr, entries)``: ``entries[ptr[s]:ptr[s+1]]`` are the entries
         whose successor is ``s`` (computed once, then cached)."""
         if self._incoming is None:
-            entries = np.argsort(self.successor, kind="stable")
-            counts = np.bincount(self.successor, minlength=self.n_states)
-            ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+            from planner.imdp.kernels import counting_order  # kernels import this module
+
+            entries, ptr = counting_order(self.successor, self.n_states)
             entries.setflags(write=False)
             ptr.setflags(write=False)
             self._incoming = (ptr, entries)

@@ -43,13 +43,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
-from planner.imdp.kernels import ReachSweeper
+from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
@@ -369,24 +367,12 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
 def _layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
     """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
     state to ``sources``; ``inf`` where there is no path."""
-    n = m.n_states
     row_mask = np.zeros(m.n_rows, dtype=bool)
     row_mask[free_rows] = True
-    rev = graph.state_graph(m, row_mask).T.tocsr()
-    src = np.flatnonzero(sources)
-    ext = sp.bmat(
-        [
-            [rev, sp.csr_matrix((n, 1), dtype=np.int8)],
-            [
-                sp.csr_matrix(
-                    (np.ones(src.size, np.int8), (np.zeros_like(src), src)), shape=(1, n)
-                ),
-                None,
-            ],
-        ],
-        format="csr",
+    ptr, entries = m.incoming()
+    return backward_distance(
+        np.asarray(sources, dtype=bool), row_mask, m.row_state, m.upper, ptr, entries, m.entry_row
     )
-    return dijkstra(ext, directed=True, indices=n, unweighted=True)[:n]
 
 
 def _reach_sweeps(
@@ -422,24 +408,18 @@ def _reach_sweeps(
     sweeper = ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)
     residual = 0.0
     it = 0
-    use_si = maximize and alg.strategy_iteration and sweeper.states.size <= _SI_MAX_STATES
+    n_free = sweeper.states.size
+    use_si = maximize and alg.strategy_iteration
     next_eval = _FIRST_EVALUATION if use_si else alg.max_iterations
     sigma: np.ndarray | None = None
     evaluations = 0
     history: list[tuple[int, float]] = []
     want_full = False
     while it < alg.max_iterations:
-        if it >= next_eval:
-            next_eval *= 2
-            if _creeping(history, alg.tolerance):
-                x, sigma, rounds = _strategy_iteration(
-                    m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
-                )
-                evaluations += rounds
-                if x is not None:
-                    v = np.maximum(v, x)
         it += 1
-        full = want_full or it % _FULL_EVERY == 1
+        check = it > next_eval
+        full = want_full or check or it % _FULL_EVERY == 1
+        before = v.copy() if check else v
         residual = sweeper.sweep(v, full)
         if alg.callback is not None:
             alg.callback(it, residual)
@@ -448,8 +428,31 @@ def _reach_sweeps(
         want_full = residual < alg.tolerance
         if want_full and full:
             break
+        if not check:
+            continue
+        next_eval *= 2
+        moving = v - before >= alg.tolerance
+        x = None
+        if 0 < moving.sum() <= _LOCAL_FRACTION * n_free:
+            # the states still moving, with the others held at their current values
+            local_rows = free_rows[moving[m.row_state[free_rows]]]
+            x, _, rounds = _strategy_iteration(
+                m, local_rows, v, np.where(moving, 0.0, v), adversary_minimizes, alg.tolerance
+            )
+            evaluations += rounds
+        elif n_free <= _SI_MAX_STATES and _creeping(history, alg.tolerance):
+            x, sigma, rounds = _strategy_iteration(
+                m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+            )
+            evaluations += rounds
+        if x is not None:
+            v = np.maximum(v, x)
     return v, residual, it, sigma, evaluations, sweeper.row_values(v)
 
+
+_LOCAL_FRACTION = 0.25
+"""Strategy iteration on the states still moving at a check when they are at most this
+fraction of the free states."""
 
 _FULL_EVERY = 3
 """Every this many sweeps (and after a sweep below the tolerance) all rows are evaluated."""
