@@ -209,7 +209,7 @@ def _attractor(
     ``O(entries of the candidate rows)``. ``choice[s]``: the row by which ``s`` joined; it
     puts positive mass, under every adversary, into states that joined before ``s``."""
     m = model
-    ptr, entries = m.incoming()
+    ptr, inc_row, inc_lower, inc_upper = m.incoming()
     return robust_attractor(
         np.asarray(start, dtype=bool),
         np.asarray(cand_rows, dtype=bool),
@@ -219,8 +219,9 @@ def _attractor(
         m.lower,
         m.upper,
         ptr,
-        entries,
-        m.entry_row,
+        inc_row,
+        inc_lower,
+        inc_upper,
         1.0 - m.tolerance,
     )
 

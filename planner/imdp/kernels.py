@@ -167,8 +167,37 @@ def gauss_seidel_sweep(
     return residual
 
 
+@numba.njit(cache=True, nogil=True)
+def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
+    """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
+    new_ptr = np.zeros(sel.size + 1, dtype=np.int64)
+    for i in range(sel.size):
+        r = sel[i]
+        new_ptr[i + 1] = new_ptr[i] + row_ptr[r + 1] - row_ptr[r]
+    n = new_ptr[-1]
+    succ2 = np.empty(n, dtype=np.int64)
+    lower2 = np.empty(n)
+    gap2 = np.empty(n)
+    crit2 = np.empty(sel.size, dtype=np.int64)
+    rem2 = np.empty(sel.size)
+    for i in range(sel.size):
+        r = sel[i]
+        off = new_ptr[i] - row_ptr[r]
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            succ2[e + off] = succ[e]
+            lower2[e + off] = lower[e]
+            gap2[e + off] = gap[e]
+        crit2[i] = crit[r] + off
+        rem2[i] = remaining[r]
+    return new_ptr, rem2, succ2, lower2, gap2, crit2
+
+
 class ReachSweeper:
     """The compact, sweep-ordered layout of the free rows of a model, and its sweeps.
+
+    Full sweeps evaluate every row and record each state's best row; light sweeps
+    evaluate only those rows, from a contiguous copy made after the last full sweep (the
+    best rows lie scattered in the full layout, which makes them slow to read).
 
     Args:
         model: the interval MDP.
@@ -194,8 +223,6 @@ class ReachSweeper:
         rows = free_rows[order]
         rs = rs[order]
         first = first_of_runs(rs)
-        self.rows = rows
-        """The original row index of every compact row, in sweep order."""
         self.states = rs[first].astype(np.int64)
         """The free states in sweep order."""
         self.state_rows = np.append(first, rows.size).astype(np.int64)
@@ -210,11 +237,15 @@ class ReachSweeper:
         self.best_row = self.state_rows[:-1].copy()
         self.maximize = bool(maximize)
         self.adversary_minimizes = bool(adversary_minimizes)
+        self._one_row = np.arange(self.states.size + 1, dtype=np.int64)
+        self._light: tuple[np.ndarray, ...] | None = None
+        self._light_rows = self.best_row
 
     def sweep(self, v: np.ndarray, full: bool = True) -> float:
-        """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`)."""
-        return float(
-            gauss_seidel_sweep(
+        """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`): all
+        rows (``full``) or the best rows of the last full sweep."""
+        if full or self._light is None:
+            residual = gauss_seidel_sweep(
                 self.states,
                 self.state_rows,
                 self.row_ptr,
@@ -225,7 +256,36 @@ class ReachSweeper:
                 self.crit,
                 v,
                 self.best_row,
-                full,
+                True,
+                self.maximize,
+                self.adversary_minimizes,
+            )
+            if self._light is None or not np.array_equal(self.best_row, self._light_rows):
+                self._light_rows = self.best_row.copy()
+                self._light = gather_rows(
+                    self.best_row,
+                    self.row_ptr,
+                    self.remaining,
+                    self.succ,
+                    self.lower,
+                    self.gap,
+                    self.crit,
+                )
+            return float(residual)
+        row_ptr, remaining, succ, lower, gap, crit = self._light
+        return float(
+            gauss_seidel_sweep(
+                self.states,
+                self._one_row,
+                row_ptr,
+                remaining,
+                succ,
+                lower,
+                gap,
+                crit,
+                v,
+                self._one_row,
+                False,
                 self.maximize,
                 self.adversary_minimizes,
             )
@@ -248,16 +308,21 @@ class ReachSweeper:
         out[self._position] = q
         return out
 
-    def strategy_rows(self) -> np.ndarray:
-        """The original row of each free state that the last full sweep found optimal,
-        in increasing state order."""
-        chosen = self.rows[self.best_row]
-        return chosen[np.argsort(self.states)]
-
 
 @numba.njit(cache=True, nogil=True)
 def robust_attractor(
-    start, cand, row_state, row_ptr, successor, lower, upper, inc_ptr, inc_entries, entry_row, limit
+    start,
+    cand,
+    row_state,
+    row_ptr,
+    successor,
+    lower,
+    upper,
+    inc_ptr,
+    inc_row,
+    inc_lower,
+    inc_upper,
+    limit,
 ):
     """The robust attractor of ``start`` with the candidate rows ``cand`` (work list).
 
@@ -300,15 +365,14 @@ def robust_attractor(
         t = queue[head]
         head += 1
         for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            e = inc_entries[k]
-            r = entry_row[e]
+            r = inc_row[k]
             if not cand[r]:
                 continue
-            if lower[e] > 0.0:
+            if inc_lower[k] > 0.0:
                 must[r] = True
-            if upper[e] > 0.0:
+            if inc_upper[k] > 0.0:
                 touches[r] = True
-            outside_up[r] -= upper[e]
+            outside_up[r] -= inc_upper[k]
             s = row_state[r]
             if not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
                 x[s] = True
@@ -384,7 +448,7 @@ def counting_order(keys, n_keys):
 
 
 @numba.njit(cache=True, nogil=True)
-def backward_distance(sources, row_mask, row_state, upper, inc_ptr, inc_entries, entry_row):
+def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper):
     """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
     entries of the rows in ``row_mask`` (``inf`` where no path)."""
     dist = np.full(sources.size, np.inf)
@@ -400,9 +464,8 @@ def backward_distance(sources, row_mask, row_state, upper, inc_ptr, inc_entries,
         t = queue[head]
         head += 1
         for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            e = inc_entries[k]
-            r = entry_row[e]
-            if not row_mask[r] or upper[e] <= 0.0:
+            r = inc_row[k]
+            if not row_mask[r] or inc_upper[k] <= 0.0:
                 continue
             s = row_state[r]
             if dist[s] == np.inf:

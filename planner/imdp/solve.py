@@ -369,9 +369,9 @@ def _layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
     state to ``sources``; ``inf`` where there is no path."""
     row_mask = np.zeros(m.n_rows, dtype=bool)
     row_mask[free_rows] = True
-    ptr, entries = m.incoming()
+    ptr, inc_row, _, inc_upper = m.incoming()
     return backward_distance(
-        np.asarray(sources, dtype=bool), row_mask, m.row_state, m.upper, ptr, entries, m.entry_row
+        np.asarray(sources, dtype=bool), row_mask, m.row_state, ptr, inc_row, inc_upper
     )
 
 
@@ -454,7 +454,7 @@ _LOCAL_FRACTION = 0.25
 """Strategy iteration on the states still moving at a check when they are at most this
 fraction of the free states."""
 
-_FULL_EVERY = 3
+_FULL_EVERY = 4
 """Every this many sweeps (and after a sweep below the tolerance) all rows are evaluated."""
 
 _SI_MAX_STATES = 20_000
