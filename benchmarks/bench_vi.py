@@ -11,7 +11,13 @@ Each is compared with a baseline run in the same process: the time of one sweep 
 same robust update with a full re-sort (``np.lexsort``) of every row, no cached order and no
 graph precomputation (timed over 3 sweeps; the ratio is per sweep).
 
-Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_vi.py [--skip-random]``
+The solver's compiled kernels (numba) are loaded from numba's cache, or compiled on a fresh
+checkout, by the first solve in a process; a small warm-up solve does that before the timed
+solves and its time is printed. ``--seed`` draws another hazard layout and other intervals
+(the sweeps needed vary with the layout).
+
+Run from the repository root:
+``PYTHONPATH=. python benchmarks/bench_vi.py [--seed 0] [--skip-random] [--skip-grid]``
 """
 
 from __future__ import annotations
