@@ -118,9 +118,10 @@ def gauss_seidel_sweep(
     ``opt`` is max (``maximize``) or min over the state's rows; the adversary minimises
     (``adversary_minimizes``) or maximises. Each update reads the values written earlier in
     the same sweep. ``full``: every row is evaluated and ``best_row[k]`` records the optimal
-    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: its
-    update is at most the full one). Iterating from below (``V_0 <= T(V_0)``) every update
-    is at most the least fixed point, so the values stay a sound lower bound.
+    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: for
+    a maximising strategy its update is at most the full one). Iterating from below
+    (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
+    sound lower bound.
     """
     sign = 1.0 if adversary_minimizes else -1.0
     width = 0

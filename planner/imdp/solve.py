@@ -391,9 +391,10 @@ def _reach_sweeps(
     the exact adversary (every row re-sorted for the current values) and ``max(old, new)``.
     Starting from ``V_0 <= T(V_0)``, every update stays below the least fixed point and the
     values only increase, which is what makes zero lower bounds and end components safe.
-    Only every ``_FULL_EVERY``-th sweep evaluates all rows (and records each state's best
-    row); the sweeps between evaluate the recorded best rows only (modified policy
-    iteration: each such update is at most the full one, so it stays sound). The sweeps
+    For a maximising strategy only every ``_FULL_EVERY``-th sweep evaluates all rows (and
+    records each state's best row); the sweeps between evaluate the recorded best rows only
+    (modified policy iteration: each such update is at most the full one, so it stays
+    sound; for a minimising strategy it would not be, and every sweep is full). The sweeps
     stop when a full sweep changes no value by ``tolerance`` or more; that change is the
     reported residual.
 
@@ -418,7 +419,8 @@ def _reach_sweeps(
     while it < alg.max_iterations:
         it += 1
         check = it > next_eval
-        full = want_full or check or it % _FULL_EVERY == 1
+        # a light sweep (one row per state) is a lower bound only when the strategy maximises
+        full = want_full or check or not maximize or it % _FULL_EVERY == 1
         before = v.copy() if check else v
         residual = sweeper.sweep(v, full)
         if alg.callback is not None:
