@@ -140,9 +140,14 @@ class IMDP:
                 f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): lower bound "
                 f"{lo[i]} exceeds upper bound {up[i]}"
             )
-        order = np.lexsort((t, a, s))
-        s, a, t, lo, up = s[order], a[order], t[order], lo[order], up[order]
         same = (s[1:] == s[:-1]) & (a[1:] == a[:-1])
+        ordered = (
+            (s[1:] > s[:-1]) | ((s[1:] == s[:-1]) & (a[1:] > a[:-1])) | (same & (t[1:] >= t[:-1]))
+        )
+        if not ordered.all():  # builders that emit sorted entries skip the sort
+            order = np.lexsort((t, a, s))
+            s, a, t, lo, up = s[order], a[order], t[order], lo[order], up[order]
+            same = (s[1:] == s[:-1]) & (a[1:] == a[:-1])
         dup = np.flatnonzero(same & (t[1:] == t[:-1]))
         if dup.size:
             i = dup[0]

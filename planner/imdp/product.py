@@ -91,17 +91,28 @@ class ProductIMDP:
         """Automaton letter of each model state's label set."""
         delta = automaton.transitions
         s, a, t, lo, up = model.coo()
-        q = np.arange(nq, dtype=np.int64)[:, None]
-        ps = (s[None, :] * nq + q).ravel()
-        pt = (t[None, :] * nq + delta[q, self.letters[t][None, :]]).ravel()
+        # every model state's block of entries once per automaton state, in the order
+        # (s, q, a, t): product state s * nq + q, so the entries come out sorted
+        start = model.row_ptr[model.state_ptr[:-1]]
+        length = model.row_ptr[model.state_ptr[1:]] - start
+        seg_start = np.repeat(start, nq)
+        seg_len = np.repeat(length, nq)
+        offsets = np.concatenate(([0], np.cumsum(seg_len)[:-1]))
+        idx = np.arange(int(seg_len.sum()), dtype=np.int64) + np.repeat(
+            seg_start - offsets, seg_len
+        )
+        q = np.repeat(np.tile(np.arange(nq, dtype=np.int64), model.n_states), seg_len)
+        s, a, t, lo, up = s[idx], a[idx], t[idx], lo[idx], up[idx]
+        ps = s * nq + q
+        pt = t * nq + delta[q, self.letters[t]]
         init = model.initial * nq + delta[automaton.initial, self.letters[model.initial]]
         self.model: IMDP = IMDP(
             model.n_states * nq,
             ps,
-            np.broadcast_to(a, (nq, a.size)).ravel(),
+            a,
             pt,
-            np.broadcast_to(lo, (nq, lo.size)).ravel(),
-            np.broadcast_to(up, (nq, up.size)).ravel(),
+            lo,
+            up,
             n_actions=model.n_actions,
             labels=[model.labels[i // nq] for i in range(model.n_states * nq)],
             propositions=model.propositions,
