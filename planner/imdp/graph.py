@@ -139,10 +139,14 @@ def state_graph(model: IMDP, rows: np.ndarray | None = None) -> sp.csr_matrix:
     """Adjacency ``(n_states, n_states)`` of the edges ``upper > 0`` of the rows in ``rows``."""
     rows = _all_rows(model, rows)
     keep = rows[model.entry_row] & (model.upper > 0)
-    src = model.row_state[model.entry_row[keep]]
+    # entries are sorted by state: the kept successors already are CSR column indices
+    # (duplicates, from several actions, are parallel edges)
+    counts = np.bincount(model.row_state[model.entry_row[keep]], minlength=model.n_states)
+    indptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
     dst = model.successor[keep]
-    g = sp.csr_matrix((np.ones(src.size, dtype=np.int8), (src, dst)), shape=(model.n_states,) * 2)
-    return g
+    return sp.csr_matrix(
+        (np.ones(dst.size, dtype=np.int8), dst, indptr), shape=(model.n_states,) * 2
+    )
 
 
 def possible_reach(
