@@ -190,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
                 "reward": e.reward,
                 "switch_step": e.switch_step,
                 "p_switch": e.p_switch,
+                "left_plan_step": e.left_plan_step,
                 "backups": e.backups,
                 "seconds": e.seconds,
                 "timings": e.timings,
