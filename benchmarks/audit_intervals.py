@@ -22,7 +22,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from hopper_sim.audit import audit_intervals, collect_run_data
+from hopper_sim.audit import audit_intervals, collect_run_data, excluded_landings
 from hopper_sim.runner import NavigationRunner
 from planner.imdp.grid import ACTIONS
 from planner.scenario import load_scenario
@@ -100,6 +100,22 @@ def main() -> None:
             f"partly filled pairs (own margins): {p.fraction:.4f} of {p.num_triples} triples "
             f"within [lower - m, upper + m]"
         )
+    ex = excluded_landings(res, every)
+    if len(ex):
+        freq = ex[:, 3] / np.maximum(ex[:, 4], 1)
+        print(
+            f"landings in successors the intervals exclude (upper 0): {int(ex[:, 3].sum())} "
+            f"hops in {len(ex)} triples, max frequency {freq.max():.3f}, by action: "
+            + ", ".join(
+                f"{ACTIONS[a]} {int(ex[ex[:, 1] == a, 3].sum())}" for a in np.unique(ex[:, 1])
+            )
+        )
+        for c, a, succ, k, n in ex[:5]:
+            i, j = grid.cell_ij(c)
+            where = "out" if succ == grid.out else str(tuple(int(v) for v in grid.cell_ij(succ)))
+            print(f"  ({int(i)},{int(j)}) {ACTIONS[a]} -> {where}: {k}/{n}")
+    else:
+        print("landings in successors the intervals exclude (upper 0): none")
     r = res.result
     if r is None:
         print("no pair filled up: nothing to audit")

@@ -31,6 +31,10 @@ Procedure (issue "learning", acceptance), sampling hops the way the navigation l
    separately with the margin of their own count (:attr:`SampledAudit.partial`). Failed hops
    (the hopper fell) are counted separately, not as landings.
 
+The binomial margin lets a successor that the intervals exclude (``[0, 0]``) be observed with
+a frequency up to ``m`` (0.091 at 200 samples); :func:`excluded_landings` lists such landings
+so that they are reported rather than hidden by the margin.
+
 What the audit claims when it passes: for the audited pairs, the intervals of ``(cell, a)``
 contain (up to the binomial margin) the successor distribution of hops that depart from a
 uniform point of the cell with a velocity of the run's distribution and that **execute**
@@ -57,6 +61,7 @@ from planner.audit import AuditResult
 from planner.audit import audit_intervals as audit
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.grid import ACTIONS, GridWorld
+from planner.intervals import TransitionIntervals
 from planner.learning import Resynthesis, resynthesise
 from planner.torch_threads import torch_threads
 
@@ -123,7 +128,7 @@ class SampledAudit:
     controller executed as requested rather than switching to a backup (``as_requested``), the
     successor counts
     ``(P, n_states)``, the failed hops (not counted as landings), and the hops simulated and
-    controller decisions made in all."""
+    controller decisions made in all; ``intervals``: the audited transition intervals."""
 
     result: AuditResult | None
     partial: AuditResult | None
@@ -135,6 +140,7 @@ class SampledAudit:
     hops: int
     decisions: int
     samples: int
+    intervals: TransitionIntervals
 
     @property
     def full(self) -> np.ndarray:
@@ -275,4 +281,26 @@ def audit_intervals(
         hops=hops,
         decisions=decisions,
         samples=samples,
+        intervals=res.intervals,
     )
+
+
+def excluded_landings(audit_: SampledAudit, pairs: np.ndarray) -> np.ndarray:
+    """``(K, 5)`` rows ``(cell, action, successor, count, executed)``: the landings of
+    ``pairs`` (the audited pairs, in order) in successors whose interval upper bound is 0 (no
+    interval row, or an upper bound of 0), with the pair's executed hops, most frequent
+    (``count / executed``) first."""
+    ti = audit_.intervals
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    upper = np.zeros(audit_.counts.shape)
+    n_actions = int(max(ti.action.max(initial=0), pairs[:, 1].max(initial=0))) + 1
+    code = pairs[:, 0] * n_actions + pairs[:, 1]
+    order = np.argsort(code)
+    row_code = ti.state * n_actions + ti.action
+    pos = np.minimum(np.searchsorted(code[order], row_code), max(len(code) - 1, 0))
+    hit = (len(code) > 0) & (code[order][pos] == row_code)
+    upper[order[pos[hit]], ti.successor[hit]] = ti.upper[hit]
+    r, c = np.nonzero((audit_.counts > 0) & (upper <= 0.0))
+    n = audit_.executed[r]
+    out = np.stack([pairs[r, 0], pairs[r, 1], c, audit_.counts[r, c], n], axis=1)
+    return out[np.argsort(-audit_.counts[r, c] / np.maximum(n, 1), kind="stable")]

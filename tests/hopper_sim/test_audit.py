@@ -4,7 +4,7 @@ benchmarks/audit_intervals.py)."""
 import numpy as np
 import pytest
 
-from hopper_sim.audit import audit_intervals, collect_run_data
+from hopper_sim.audit import audit_intervals, collect_run_data, excluded_landings
 from hopper_sim.runner import NavigationRunner
 from planner.scenario import load_scenario
 
@@ -35,7 +35,14 @@ def test_small_loop_like_audit_holds(run):
     assert res.decisions >= res.hops and res.decisions == res.requests.sum()
     assert res.full.sum() >= len(pairs) // 2  # most actions get executed from these states
     assert res.result is not None and res.result.num_triples >= int(res.full.sum())
-    assert res.result.fraction >= 0.95, res.result.offenders[:3]
+    assert res.result.fraction >= 0.99, res.result.offenders[:3]
+    # landings the intervals exclude are listed, not hidden by the margin
+    ti = res.intervals
+    for c, a, succ, k, n in excluded_landings(res, pairs):
+        row = (ti.state == c) & (ti.action == a) & (ti.successor == succ)
+        assert not (ti.upper[row] > 0).any() and 0 < k <= n
+        p = int(np.flatnonzero((pairs[:, 0] == c) & (pairs[:, 1] == a))[0])
+        assert res.counts[p, succ] == k and res.executed[p] == n
 
 
 def test_audit_rejects_bad_pairs(run):
