@@ -22,12 +22,22 @@ run is held to the guarantee it reported. The phase stays goal reaching while th
 has an allowed action in that plan (the switch's satisfying sub-model). If the robot lands in a
 state outside it (possible: the satisfying sub-model keeps every action whose worst-case value
 exceeds ``P_sat``, not only the optimal one, and the real system may fall outside the
-intervals), the policy *leaves the plan*: it records the step (:attr:`SwitchingPolicy.
-left_plan_step`, which a runner must report), returns to exploration with the latest plans and
-may switch again under the same rule (with a new plan; ``switch_step`` and ``p_switch`` stay
-those of the first switch). With ``keep_goal_plan=False`` every re-synthesis replaces the goal
-plan too (the guarantee then refers to a model that changes under the run), and the policy
-returns to exploration where the latest plan has no action.
+intervals), the policy *leaves the plan*: it records the step
+(:attr:`SwitchingPolicy.left_plan_step`, which a runner must report), returns to exploration
+with the latest plans and may switch again under the same rule (with a new plan;
+``switch_step`` and ``p_switch`` stay those of the first switch). With
+``keep_goal_plan=False`` every re-synthesis replaces the goal plan too (the guarantee then
+refers to a model that changes under the run), and the policy returns to exploration where
+the latest plan has no action.
+
+What ``p_switch`` promises: following the kept plan's LTL action from the switch state
+satisfies the formula with probability at least ``p_switch`` under every adversary of the
+switch's IMDP (and so on the real system if its intervals are sound). The goal-reaching policy
+also takes RL actions (probability ``C exp(-eps m)``), only among actions whose worst-case value
+under that IMDP exceeds ``P_sat``; an RL action can thus lower the guarantee towards ``P_sat``,
+and a run that then lands outside the satisfying sub-model is the case reported by
+``left_plan_step``. The promise has no time bound: a runner's step cap may still end a run
+that follows the plan (a timeout).
 
 Fallback: where the nonviolating sub-model allows no action in the current state (typically at
 the start, when the prior's wide intervals let every hop possibly leave the world or reach a
