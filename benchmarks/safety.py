@@ -49,7 +49,7 @@ def main() -> None:
             f"reward {e.reward:7.1f} switch {e.switch_step} p_switch "
             f"{'-' if e.p_switch is None else f'{e.p_switch:.3f}'} "
             f"{'' if e.left_plan_step is None else f'left plan at {e.left_plan_step} '}"
-            f"{e.seconds:.1f} s"
+            f"{e.seconds:.1f} s (longest re-synthesis {e.timings.get('batch_max', 0.0):.2f} s)"
         )
     n = len(ends)
     outcomes = [e.outcome for e in ends]
