@@ -23,7 +23,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from planner.errors import SpecificationError
-from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.kernels import robust_attractor, rows_staying_in
+from planner.imdp.model import IMDP
 
 
 @dataclass(frozen=True)
@@ -199,75 +200,30 @@ def robust_positive_reach(
     return _attractor(model, target.copy(), cand)
 
 
-def _gather_incoming(model: IMDP, states: np.ndarray) -> np.ndarray:
-    """Indices of the entries whose successor is one of ``states``."""
-    ptr, entries = model.incoming()
-    starts, ends = ptr[states], ptr[states + 1]
-    lens = ends - starts
-    total = int(lens.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64)
-    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
-    return entries[np.arange(total) + offs]
-
-
-def _entries_of(model: IMDP, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Entry indices of ``rows`` (row after row) and each row's first position in them."""
-    starts = model.row_ptr[rows]
-    lens = model.row_ptr[rows + 1] - starts
-    local = np.concatenate(([0], np.cumsum(lens)[:-1])).astype(np.int64)
-    ent = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(starts - local, lens)
-    return ent, local
-
-
 def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Layered robust attractor: add states with a candidate row forced into the set.
-
-    Work-list version of :func:`forced_into`: each layer only re-examines the rows with an
-    entry into the states added by the previous layer, so the whole attractor costs
-    ``O(entries of the candidate rows)`` plus ``O(k + rows)`` per layer (``k``: the
-    entries into the layer).
-    """
+    """Robust attractor: add states with a candidate row forced into the set (a work list
+    in compiled code, :func:`planner.imdp.kernels.robust_attractor`): every state that
+    joins re-examines only the rows with an entry into it, so the whole attractor costs
+    ``O(entries of the candidate rows)``. ``choice[s]``: the row by which ``s`` joined; it
+    puts positive mass, under every adversary, into states that joined before ``s``."""
     m = model
-    x = start.copy()
-    choice = np.full(m.n_states, -1, dtype=np.int64)
-    cand_idx = np.flatnonzero(cand_rows)
-    must = np.zeros(m.n_rows, dtype=bool)
-    touches = np.zeros(m.n_rows, dtype=bool)
-    outside_up = np.zeros(m.n_rows)
-    if cand_idx.size == 0:
-        return x, choice
-    ent, local = _entries_of(m, cand_idx)
-    inside = x[m.successor[ent]]
-    er0 = m.entry_row[ent]
-    must[er0[(m.lower[ent] > 0) & inside]] = True
-    touches[er0[inside & (m.upper[ent] > 0)]] = True
-    outside_up[cand_idx] = np.add.reduceat(np.where(inside, 0.0, m.upper[ent]), local)
-    limit = 1.0 - m.tolerance
-    check = np.flatnonzero(cand_rows & (must | touches))
-    while check.size:
-        ok = check[
-            ~x[m.row_state[check]] & (must[check] | (touches[check] & (outside_up[check] < limit)))
-        ]
-        if ok.size == 0:
-            break
-        states = m.row_state[ok]
-        first = first_of_runs(states)  # rows (hence states) are in increasing order
-        new = states[first]
-        choice[new] = ok[first]
-        x[new] = True
-        e = _gather_incoming(m, new)
-        e = e[cand_rows[m.entry_row[e]]]
-        er = m.entry_row[e]
-        must[er[m.lower[e] > 0]] = True
-        touches[er[m.upper[e] > 0]] = True
-        mark = np.zeros(m.n_rows, dtype=bool)
-        mark[er] = True
-        check = np.flatnonzero(mark)
-        outside_up[check] -= np.bincount(er, weights=m.upper[e], minlength=m.n_rows)[check]
-    return x, choice
+    ptr, inc_row, inc_lower, inc_upper = m.incoming()
+    return robust_attractor(
+        np.asarray(start, dtype=bool),
+        np.asarray(cand_rows, dtype=bool),
+        m.row_state,
+        m.row_ptr,
+        m.successor,
+        m.lower,
+        m.upper,
+        ptr,
+        inc_row,
+        inc_lower,
+        inc_upper,
+        1.0 - m.tolerance,
+    )
 
 
 def robust_almost_sure_reach(
@@ -296,13 +252,10 @@ def robust_almost_sure_reach(
     if avoid is not None:
         u &= ~np.asarray(avoid, dtype=bool) | target
     while True:
-        # rows of U that cannot leave U (only their entries are read: U shrinks)
-        rows_u = np.flatnonzero(rows & u[model.row_state] & ~target[model.row_state])
-        cand = np.zeros(model.n_rows, dtype=bool)
-        if rows_u.size:
-            ent, local = _entries_of(model, rows_u)
-            leaves = (model.upper[ent] > 0) & ~u[model.successor[ent]]
-            cand[rows_u[~np.logical_or.reduceat(leaves, local)]] = True
+        # rows of U (targets excluded) that cannot leave U
+        cand = rows_staying_in(
+            u, rows, model.row_state, model.row_ptr, model.successor, model.upper, target
+        )
         x, choice = _attractor(model, target & u, cand)
         x &= u
         if np.array_equal(x, u):

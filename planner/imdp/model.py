@@ -259,16 +259,19 @@ class IMDP:
     def n_entries(self) -> int:
         return int(self.successor.shape[0])
 
-    def incoming(self) -> tuple[np.ndarray, np.ndarray]:
-        """Reverse index ``(ptr, entries)``: ``entries[ptr[s]:ptr[s+1]]`` are the entries
-        whose successor is ``s`` (computed once, then cached)."""
+    def incoming(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Reverse index ``(ptr, rows, lower, upper)``: positions ``ptr[s]:ptr[s+1]`` list
+        the entries whose successor is ``s``, by their row and bounds (stored in that
+        order, so walking a state's predecessors reads memory sequentially; computed once,
+        then cached)."""
         if self._incoming is None:
-            entries = np.argsort(self.successor, kind="stable")
-            counts = np.bincount(self.successor, minlength=self.n_states)
-            ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-            entries.setflags(write=False)
-            ptr.setflags(write=False)
-            self._incoming = (ptr, entries)
+            from planner.imdp.kernels import counting_order  # kernels import this module
+
+            entries, ptr = counting_order(self.successor, self.n_states)
+            view = (ptr, self.entry_row[entries], self.lower[entries], self.upper[entries])
+            for a in view:
+                a.setflags(write=False)
+            self._incoming = view
         return self._incoming
 
     def states_labelled(self, name: str) -> np.ndarray:

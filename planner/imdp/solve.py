@@ -18,11 +18,10 @@ Properties:
 residual. For discounted reward the error is at most ``gamma / (1 - gamma) * residual``;
 for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
 
-Reachability sweeps are Gauss-Seidel over layers of graph distance to the value-1 states
-and use :meth:`OrderingAdversary.lower_bound` (no sorting) between order refreshes every
-8 sweeps: starting from ``V_0 <= T(V_0)`` the iterates increase and stay below the least
-fixed point, so zero lower bounds and end components stay safe; the last sweeps use the
-exact order (see ``_reach_sweeps``).
+Reachability sweeps are Gauss-Seidel, state by state in order of graph distance to the
+value-1 states (a compiled kernel, :mod:`planner.imdp.kernels`): starting from
+``V_0 <= T(V_0)`` the iterates increase and stay below the least fixed point, so zero lower
+bounds and end components stay safe (see ``_reach_sweeps``).
 
 Where mass leaks slowly out of near-end-components the sweeps from below creep (the
 residual can stay near ``1e-8`` per sweep while the values are still far from the fixed
@@ -44,12 +43,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
+from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
@@ -288,7 +286,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
             zero = np.zeros(n, dtype=bool)
         elif maximize and pessimistic:
             pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
-            prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows)
+            prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
             zero = ~pos
         elif maximize:
             zero = ~graph.possible_reach(m, target, avoid, rows)
@@ -311,23 +309,20 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     def backup(v: np.ndarray) -> np.ndarray:
         return v if reward is None else reward + discount * v
 
-    full = OrderingAdversary(
-        m,
-        adversary_minimizes,
-        rows=free_rows,
-        resort_tolerance=0.0 if reward is None else alg.tolerance * 1e-2,
-    )
     sigma: np.ndarray | None = None
     evaluations = 0
     if reward is None:
-        v, residual, it, sigma, evaluations = _reach_sweeps(
+        v, residual, it, sigma, evaluations, q_free = _reach_sweeps(
             m, free_rows, fixed_val, adversary_minimizes, maximize, alg
         )
     else:
+        # discounted reward: Jacobi sweeps that tolerate successors out of order by less
+        # than tolerance / 100, then exact sweeps until the residual is small
+        full = OrderingAdversary(
+            m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
+        )
         v, residual, it = fixed_val.copy(), 0.0, 0
         while free_rows.size and it < alg.max_iterations:
-            # discounted reward: Jacobi sweeps that tolerate successors out of order by
-            # less than tolerance / 100, then exact sweeps until the residual is small
             it += 1
             q_free = full.expectation(backup(v))
             v_new = v.copy()
@@ -340,7 +335,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
                 if full.resort_tolerance == 0.0:
                     break
                 full.resort_tolerance = 0.0
-    q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
+        q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
     if sigma is not None:
         # strategy iteration's strategy: its exact value is the least fixed point
@@ -372,24 +367,12 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
 def _layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
     """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
     state to ``sources``; ``inf`` where there is no path."""
-    n = m.n_states
     row_mask = np.zeros(m.n_rows, dtype=bool)
     row_mask[free_rows] = True
-    rev = graph.state_graph(m, row_mask).T.tocsr()
-    src = np.flatnonzero(sources)
-    ext = sp.bmat(
-        [
-            [rev, sp.csr_matrix((n, 1), dtype=np.int8)],
-            [
-                sp.csr_matrix(
-                    (np.ones(src.size, np.int8), (np.zeros_like(src), src)), shape=(1, n)
-                ),
-                None,
-            ],
-        ],
-        format="csr",
+    ptr, inc_row, _, inc_upper = m.incoming()
+    return backward_distance(
+        np.asarray(sources, dtype=bool), row_mask, m.row_state, ptr, inc_row, inc_upper
     )
-    return dijkstra(ext, directed=True, indices=n, unweighted=True)[:n]
 
 
 def _reach_sweeps(
@@ -399,91 +382,82 @@ def _reach_sweeps(
     adversary_minimizes: bool,
     maximize: bool,
     alg: ValueIteration,
-) -> tuple[np.ndarray, float, int]:
-    """Reachability value iteration from below, Gauss-Seidel by distance layers.
+) -> tuple[np.ndarray, float, int, np.ndarray | None, int, np.ndarray]:
+    """Reachability value iteration from below: state-by-state Gauss-Seidel sweeps.
 
-    The free states are updated layer by layer in order of their graph distance to the
-    value-1 states (targets, and states of worst-case value 1), each layer with the values
-    just computed for the layers before it, so one sweep carries a value across the whole
-    model. Sweeps use :meth:`OrderingAdversary.lower_bound` (no sorting; the order is
-    refreshed every 8 sweeps); each update is ``max(old, new)``. Starting from
-    ``V_0 <= T(V_0)``, every update stays below the least fixed point and the values only
-    increase, which is what makes zero lower bounds and end components safe. Once a sweep
-    changes no value by ``tolerance`` or more, sweeps use the exact order until one again
-    changes none by that much; that change is the reported residual.
+    The free states are visited in order of their graph distance to the value-1 states
+    (targets, and states of worst-case value 1), each update reading the values written
+    before it in the same sweep (:class:`planner.imdp.kernels.ReachSweeper`, compiled), with
+    the exact adversary (every row re-sorted for the current values) and ``max(old, new)``.
+    Starting from ``V_0 <= T(V_0)``, every update stays below the least fixed point and the
+    values only increase, which is what makes zero lower bounds and end components safe.
+    For a maximising strategy only every ``_FULL_EVERY``-th sweep evaluates all rows (and
+    records each state's best row); the sweeps between evaluate the recorded best rows only
+    (modified policy iteration: each such update is at most the full one, so it stays
+    sound; for a minimising strategy it would not be, and every sweep is full). The sweeps
+    stop when a full sweep changes no value by ``tolerance`` or more; that change is the
+    reported residual.
 
-    Returns ``(values, residual, sweeps, strategy, evaluations)``: ``strategy`` is the last strategy
-    iteration's optimal strategy (one row per free state) or ``None``.
+    Returns ``(values, residual, sweeps, strategy, evaluations, q)``: ``strategy`` is the
+    last strategy iteration's optimal strategy (one row per free state) or ``None``; ``q``
+    the robust value of every free row under the final values.
     """
     v = fixed_val.copy()
     if free_rows.size == 0:
-        return v, 0.0, 0, None, 0
-    rs = m.row_state[free_rows]
+        return v, 0.0, 0, None, 0, np.zeros(0)
     dist = _layers(m, free_rows, fixed_val == 1.0)
-    dist = np.where(np.isfinite(dist), dist, np.inf)
-    row_dist = dist[rs]
-    order = np.argsort(row_dist, kind="stable")  # rows stay sorted by state per layer
-    rd = row_dist[order]
-    cuts = first_of_runs(rd)
-    op = np.maximum if maximize else np.minimum
-    layers = []
-    for k, start in enumerate(cuts):
-        stop = cuts[k + 1] if k + 1 < cuts.size else rd.size
-        lr = free_rows[np.sort(order[start:stop])]
-        lrs = m.row_state[lr]
-        seg = first_of_runs(lrs)
-        layers.append((OrderingAdversary(m, adversary_minimizes, rows=lr), seg, lrs[seg]))
-    refresh = _REFRESH
+    sweeper = ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)
     residual = 0.0
     it = 0
-    exact = False
-    use_si = (
-        maximize
-        and alg.strategy_iteration
-        and free_rows.size
-        and (np.unique(m.row_state[free_rows]).size <= _SI_MAX_STATES)
-    )
+    n_free = sweeper.states.size
+    use_si = maximize and alg.strategy_iteration
     next_eval = _FIRST_EVALUATION if use_si else alg.max_iterations
     sigma: np.ndarray | None = None
     evaluations = 0
-    history: list[tuple[int, float]] = []  # (sweep, residual) of sweeps with a fresh order
+    history: list[tuple[int, float]] = []
+    want_full = False
     while it < alg.max_iterations:
-        if it >= next_eval:
-            next_eval *= 2
-            if _creeping(history, alg.tolerance):
-                x, sigma, rounds = _strategy_iteration(
-                    m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
-                )
-                evaluations += rounds
-                if x is not None:
-                    v = np.maximum(v, x)
-                    for adv, _, _ in layers:
-                        adv.update(v)
         it += 1
-        residual = 0.0
-        for adv, seg, states in layers:
-            if exact:
-                q = adv.expectation(v)
-            else:
-                if it % refresh == 0:
-                    adv.update(v)
-                q = adv.lower_bound(v)
-            new = np.maximum(op.reduceat(q, seg), v[states])
-            residual = max(residual, float(np.max(new - v[states])))
-            v[states] = new
+        check = it > next_eval
+        # a light sweep (one row per state) is a lower bound only when the strategy maximises
+        full = want_full or check or not maximize or it % _FULL_EVERY == 1
+        before = v.copy() if check else v
+        residual = sweeper.sweep(v, full)
         if alg.callback is not None:
             alg.callback(it, residual)
-        if exact or it % refresh == 0:
+        if full:
             history.append((it, residual))
-        if residual < alg.tolerance:
-            if exact:
-                break
-            exact = True
-    return v, residual, it, sigma, evaluations
+        want_full = residual < alg.tolerance
+        if want_full and full:
+            break
+        if not check:
+            continue
+        next_eval *= 2
+        moving = v - before >= alg.tolerance
+        x = None
+        if 0 < moving.sum() <= _LOCAL_FRACTION * n_free:
+            # the states still moving, with the others held at their current values
+            local_rows = free_rows[moving[m.row_state[free_rows]]]
+            x, _, rounds = _strategy_iteration(
+                m, local_rows, v, np.where(moving, 0.0, v), adversary_minimizes, alg.tolerance
+            )
+            evaluations += rounds
+        elif n_free <= _SI_MAX_STATES and _creeping(history, alg.tolerance):
+            x, sigma, rounds = _strategy_iteration(
+                m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+            )
+            evaluations += rounds
+        if x is not None:
+            v = np.maximum(v, x)
+    return v, residual, it, sigma, evaluations, sweeper.row_values(v)
 
 
-_REFRESH = 8
-"""Sweeps between refreshes of the layers' adversary orders."""
+_LOCAL_FRACTION = 0.25
+"""Strategy iteration on the states still moving at a check when they are at most this
+fraction of the free states."""
+
+_FULL_EVERY = 4
+"""Every this many sweeps (and after a sweep below the tolerance) all rows are evaluated."""
 
 _SI_MAX_STATES = 20_000
 """Strategy iteration only for at most this many free states: its sparse LU solves can
@@ -499,9 +473,8 @@ _CREEP_SWEEPS = 1000
 def _creeping(history: list[tuple[int, float]], tol: float) -> bool:
     """Whether, after ``k`` sweeps, the sweeps would take more than
     ``max(4 k, _CREEP_SWEEPS)`` more sweeps to reach ``tol`` at the rate seen since sweep
-    ``k / 2`` (geometric extrapolation of the residuals of the sweeps with a fresh order,
-    given as ``(sweep, residual)``; stale-order sweeps can stall on a plateau below the
-    values). Only decides *when* to run strategy iteration; the values are sound either
+    ``k / 2`` (geometric extrapolation of the residuals, given as ``(sweep, residual)``).
+    Only decides *when* to run strategy iteration; the values are sound either
     way."""
     if len(history) < 2:
         return False

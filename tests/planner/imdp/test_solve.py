@@ -255,3 +255,36 @@ def test_creeping_detection():
     assert not creeping(fresh([1.0, 1e-9]), 1e-8)  # already below the tolerance
     # the rate is taken since sweep k / 2: 16 -> 32 here
     assert not creeping(fresh([1.0, 1e-3, 1e-3, 1e-3 * 0.5**16]), 1e-8)
+
+
+def test_local_strategy_iteration_on_a_slow_corner(monkeypatch):
+    # 40 fast states reach the goal (1) with [0.6, 0.8] and the sink (0) with [0.2, 0.4]:
+    # worst case 0.6, settled within a few sweeps. Three slow states keep 1 - 3e-7 ..
+    # 1 - 1e-7 on themselves and leak to fast state 2 with [1e-7, 2e-7] and to the sink
+    # with [0, 2e-7]: worst case V = 0.6 * 1e-7 / 3e-7 = 0.2, which sweeps from 0 reach only
+    # after millions of sweeps. With the global switch disabled, only strategy iteration on
+    # the states still moving (the slow corner, the fast states held) can get there.
+    monkeypatch.setattr(solve_module, "_creeping", lambda history, tol: False)
+    n_fast, n_slow = 40, 3
+    s, a, t, lo, up = [0, 1], [0, 0], [0, 1], [1.0, 1.0], [1.0, 1.0]
+    for q in range(2, 2 + n_fast):
+        s += [q, q]
+        a += [0, 0]
+        t += [1, 0]
+        lo += [0.6, 0.2]
+        up += [0.8, 0.4]
+    for q in range(2 + n_fast, 2 + n_fast + n_slow):
+        s += [q, q, q]
+        a += [0, 0, 0]
+        t += [2, 0, q]
+        lo += [1e-7, 0.0, 1 - 3e-7]
+        up += [2e-7, 2e-7, 1 - 1e-7]
+    n = 2 + n_fast + n_slow
+    m = IMDP(n, s, a, t, lo, up, labels=[(), ("g",)] + [()] * (n - 2))
+    sol = solve(Problem(m, Specification(ReachAvoid("g"))))
+    assert sol.values[2 : 2 + n_fast] == pytest.approx(0.6, abs=1e-12)
+    assert sol.values[2 + n_fast :] == pytest.approx(0.2, abs=1e-8)
+    assert sol.converged and sol.iterations < 200 and sol.evaluations >= 1
+    plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
+    slow = solve(Problem(m, Specification(ReachAvoid("g"))), plain)
+    assert np.all(slow.values[2 + n_fast :] < 0.01) and slow.evaluations == 0

@@ -1,0 +1,476 @@
+"""Compiled (numba) kernels for the sequential parts of robust value iteration.
+
+A Gauss-Seidel sweep is sequential by nature: every state's update reads the values that
+the states before it in the sweep have just written. Array operations can only do that
+layer by layer (Jacobi inside a layer); these kernels do it state by state.
+
+Layout (built by :class:`ReachSweeper`): the free states in sweep order, their rows
+(``state_rows[k]:state_rows[k + 1]`` are the rows of the ``k``-th state) and, per row, its
+entries ``row_ptr[r]:row_ptr[r + 1]`` with successor, lower bound and gap ``u - l``.  Each row
+remembers its critical successor (see :func:`_row_value`), so a row whose adversary
+choice still stands costs one pass and no sorting.
+
+The robust expectation of a row under the state-ordering adversary (Lahijanian et al. 2015):
+with the successors sorted so that the adversary's preferred ones come first, every
+successor gets its lower bound and the remaining mass ``1 - sum(l)`` is handed out in that
+order, at most ``u_j - l_j`` each.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.ordering import row_entries
+
+
+@numba.njit(cache=True, nogil=True)
+def _sorted_value(
+    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
+):
+    """The ordering adversary's expectation by sorting the row (an insertion sort into the
+    scratch arrays ``idx``/``keys``); records the row's critical entry in ``crit[r]``."""
+    n = b - a
+    for i in range(n):
+        k = sign * v[succ[a + i]]
+        j = i - 1
+        while j >= 0 and keys[j] > k:
+            keys[j + 1] = keys[j]
+            idx[j + 1] = idx[j]
+            j -= 1
+        keys[j + 1] = k
+        idx[j + 1] = a + i
+    left = remaining
+    q = 0.0
+    c = idx[n - 1]
+    found = False
+    for i in range(n):
+        e = idx[i]
+        add = gap[e] if gap[e] < left else left
+        if add < 0.0:
+            add = 0.0
+        if not found and add < gap[e]:
+            c = e
+            found = True
+        left -= add
+        q += (lower[e] + add) * keys[i]
+    crit[r] = c
+    return sign * q
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_value(
+    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
+):
+    """The ordering adversary's ``sum_j p_j v[succ_j]`` over the entries ``a:b``.
+
+    With keys ``k_j = sign * v[succ_j]`` (``sign = 1``: the minimising adversary) the
+    adversary gives every successor its lower bound and the remaining mass
+    ``rem = 1 - sum(l)`` to the smallest keys first. With ``t`` the key of the critical
+    successor (where the handed-out gaps reach ``rem``) that is
+
+        sum_j l_j k_j + rem t - sum_{k_j < t} (u_j - l_j) (t - k_j),
+
+    valid exactly when ``G(< t) <= rem <= G(<= t)`` (``G``: summed gaps). The row's
+    threshold from the last call is tried first (one pass, no sorting, no branches on the
+    values); if the new values moved it, the row is sorted.
+    """
+    if remaining > 0.0:
+        t = sign * v[succ[crit[r]]]
+        lv = 0.0
+        g_less = 0.0
+        g_eq = 0.0
+        short = 0.0
+        for i in range(a, b):
+            k = sign * v[succ[i]]
+            g = gap[i]
+            lv += lower[i] * k
+            d = t - k
+            below = d > 0.0
+            g_less += g if below else 0.0
+            short += g * d if below else 0.0
+            g_eq += g if d == 0.0 else 0.0
+        if g_less <= remaining and remaining <= g_less + g_eq:
+            return sign * (lv + remaining * t - short)
+    return _sorted_value(a, b, remaining, succ, lower, gap, v, sign, crit, r, idx, keys)
+
+
+@numba.njit(cache=True, nogil=True)
+def gauss_seidel_sweep(
+    states,
+    state_rows,
+    row_ptr,
+    remaining,
+    succ,
+    lower,
+    gap,
+    crit,
+    v,
+    best_row,
+    full,
+    maximize,
+    adversary_minimizes,
+) -> float:
+    """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
+    ``states`` in order, in place; returns ``max_s`` of the change.
+
+    ``opt`` is max (``maximize``) or min over the state's rows; the adversary minimises
+    (``adversary_minimizes``) or maximises. Each update reads the values written earlier in
+    the same sweep. ``full``: every row is evaluated and ``best_row[k]`` records the optimal
+    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: for
+    a maximising strategy its update is at most the full one). Iterating from below
+    (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
+    sound lower bound.
+    """
+    sign = 1.0 if adversary_minimizes else -1.0
+    width = 0
+    for r in range(row_ptr.size - 1):
+        width = max(width, row_ptr[r + 1] - row_ptr[r])
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    residual = 0.0
+    for k in range(states.size):
+        s = states[k]
+        if full:
+            lo = state_rows[k]
+            hi = state_rows[k + 1]
+        else:
+            lo = best_row[k]
+            hi = lo + 1
+        best = -np.inf if maximize else np.inf
+        arg = lo
+        for r in range(lo, hi):
+            q = _row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                v,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if (q > best) if maximize else (q < best):
+                best = q
+                arg = r
+        if full:
+            best_row[k] = arg
+        old = v[s]
+        if best > old:
+            v[s] = best
+            if best - old > residual:
+                residual = best - old
+    return residual
+
+
+@numba.njit(cache=True, nogil=True)
+def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
+    """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
+    new_ptr = np.zeros(sel.size + 1, dtype=np.int64)
+    for i in range(sel.size):
+        r = sel[i]
+        new_ptr[i + 1] = new_ptr[i] + row_ptr[r + 1] - row_ptr[r]
+    n = new_ptr[-1]
+    succ2 = np.empty(n, dtype=np.int64)
+    lower2 = np.empty(n)
+    gap2 = np.empty(n)
+    crit2 = np.empty(sel.size, dtype=np.int64)
+    rem2 = np.empty(sel.size)
+    for i in range(sel.size):
+        r = sel[i]
+        off = new_ptr[i] - row_ptr[r]
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            succ2[e + off] = succ[e]
+            lower2[e + off] = lower[e]
+            gap2[e + off] = gap[e]
+        crit2[i] = crit[r] + off
+        rem2[i] = remaining[r]
+    return new_ptr, rem2, succ2, lower2, gap2, crit2
+
+
+class ReachSweeper:
+    """The compact, sweep-ordered layout of the free rows of a model, and its sweeps.
+
+    Full sweeps evaluate every row and record each state's best row; light sweeps
+    evaluate only those rows, from a contiguous copy made after the last full sweep (the
+    best rows lie scattered in the full layout, which makes them slow to read).
+
+    Args:
+        model: the interval MDP.
+        free_rows: the rows the strategy may use at the free states (sorted).
+        sweep_key: ``(n_states,)`` sort key of the states; sweeps visit the free states in
+            increasing key (ties by index).
+        maximize: the strategy maximises (else minimises) over rows.
+        adversary_minimizes: the adversary minimises (else maximises) the expectation.
+    """
+
+    def __init__(
+        self,
+        model: IMDP,
+        free_rows: np.ndarray,
+        sweep_key: np.ndarray,
+        maximize: bool,
+        adversary_minimizes: bool,
+    ) -> None:
+        m = model
+        rs = m.row_state[free_rows]
+        order = np.lexsort((free_rows, sweep_key[rs]))
+        self._position = order
+        rows = free_rows[order]
+        rs = rs[order]
+        first = first_of_runs(rs)
+        self.states = rs[first].astype(np.int64)
+        """The free states in sweep order."""
+        self.state_rows = np.append(first, rows.size).astype(np.int64)
+        ent = row_entries(m, rows)
+        lens = m.row_ptr[rows + 1] - m.row_ptr[rows]
+        self.row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
+        self.remaining = 1.0 - m.row_lower_sum[rows]
+        self.succ = m.successor[ent].astype(np.int64)
+        self.lower = m.lower[ent].astype(np.float64)
+        self.gap = m.upper[ent] - self.lower
+        self.crit = self.row_ptr[:-1].copy()
+        self.best_row = self.state_rows[:-1].copy()
+        self.maximize = bool(maximize)
+        self.adversary_minimizes = bool(adversary_minimizes)
+        self._one_row = np.arange(self.states.size + 1, dtype=np.int64)
+        self._light: tuple[np.ndarray, ...] | None = None
+        self._light_rows = self.best_row
+
+    def sweep(self, v: np.ndarray, full: bool = True) -> float:
+        """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`): all
+        rows (``full``) or the best rows of the last full sweep."""
+        if full or self._light is None:
+            residual = gauss_seidel_sweep(
+                self.states,
+                self.state_rows,
+                self.row_ptr,
+                self.remaining,
+                self.succ,
+                self.lower,
+                self.gap,
+                self.crit,
+                v,
+                self.best_row,
+                True,
+                self.maximize,
+                self.adversary_minimizes,
+            )
+            if self._light is None or not np.array_equal(self.best_row, self._light_rows):
+                self._light_rows = self.best_row.copy()
+                self._light = gather_rows(
+                    self.best_row,
+                    self.row_ptr,
+                    self.remaining,
+                    self.succ,
+                    self.lower,
+                    self.gap,
+                    self.crit,
+                )
+            return float(residual)
+        row_ptr, remaining, succ, lower, gap, crit = self._light
+        return float(
+            gauss_seidel_sweep(
+                self.states,
+                self._one_row,
+                row_ptr,
+                remaining,
+                succ,
+                lower,
+                gap,
+                crit,
+                v,
+                self._one_row,
+                False,
+                self.maximize,
+                self.adversary_minimizes,
+            )
+        )
+
+    def row_values(self, v: np.ndarray) -> np.ndarray:
+        """The robust expectation of ``v`` for every free row, in the order of the
+        ``free_rows`` given to the constructor."""
+        q = all_row_values(
+            self.row_ptr,
+            self.remaining,
+            self.succ,
+            self.lower,
+            self.gap,
+            self.crit,
+            v,
+            self.adversary_minimizes,
+        )
+        out = np.empty_like(q)
+        out[self._position] = q
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def robust_attractor(
+    start,
+    cand,
+    row_state,
+    row_ptr,
+    successor,
+    lower,
+    upper,
+    inc_ptr,
+    inc_row,
+    inc_lower,
+    inc_upper,
+    limit,
+):
+    """The robust attractor of ``start`` with the candidate rows ``cand`` (work list).
+
+    A state joins when one of its candidate rows puts positive mass into the set under
+    every adversary: an entry with ``lower > 0`` into the set, or an ``upper > 0`` entry
+    into it while the upper bounds of the entries outside sum to less than ``limit``
+    (``1 - tolerance``). Each state that joins updates only the rows with an entry into it,
+    so the whole attractor costs ``O(entries of the candidate rows + their incoming
+    lists)``. Returns ``(mask, choice)``: ``choice[s]`` is the row by which ``s`` joined
+    (-1 for ``start`` and outside); a joining row only counts states that joined before.
+    """
+    n_rows = row_ptr.size - 1
+    x = start.copy()
+    choice = np.full(x.size, -1, dtype=np.int64)
+    must = np.zeros(n_rows, dtype=np.bool_)
+    touches = np.zeros(n_rows, dtype=np.bool_)
+    outside_up = np.zeros(n_rows)
+    queue = np.empty(x.size, dtype=np.int64)
+    tail = 0
+    for r in range(n_rows):
+        if not cand[r]:
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if x[successor[e]]:
+                if lower[e] > 0.0:
+                    must[r] = True
+                if upper[e] > 0.0:
+                    touches[r] = True
+            else:
+                outside_up[r] += upper[e]
+    for r in range(n_rows):
+        s = row_state[r]
+        if cand[r] and not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+            x[s] = True
+            choice[s] = r
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if not cand[r]:
+                continue
+            if inc_lower[k] > 0.0:
+                must[r] = True
+            if inc_upper[k] > 0.0:
+                touches[r] = True
+            outside_up[r] -= inc_upper[k]
+            s = row_state[r]
+            if not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+                x[s] = True
+                choice[s] = r
+                queue[tail] = s
+                tail += 1
+    return x, choice
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
+    """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
+    successor lies in ``u``."""
+    n_rows = row_ptr.size - 1
+    out = np.zeros(n_rows, dtype=np.bool_)
+    for r in range(n_rows):
+        s = row_state[r]
+        if not rows[r] or not u[s] or exclude[s]:
+            continue
+        ok = True
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper[e] > 0.0 and not u[successor[e]]:
+                ok = False
+                break
+        out[r] = ok
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
+    """The adversary's expectation of ``v`` for every row of the layout."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    width = 0
+    for r in range(row_ptr.size - 1):
+        width = max(width, row_ptr[r + 1] - row_ptr[r])
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    out = np.empty(row_ptr.size - 1)
+    for r in range(row_ptr.size - 1):
+        out[r] = _row_value(
+            row_ptr[r],
+            row_ptr[r + 1],
+            remaining[r],
+            succ,
+            lower,
+            gap,
+            v,
+            sign,
+            crit,
+            r,
+            idx,
+            keys,
+        )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def counting_order(keys, n_keys):
+    """Stable order of ``keys`` (integers in ``[0, n_keys)``) by counting sort, and the
+    start of each key's run: ``(order, ptr)``."""
+    ptr = np.zeros(n_keys + 1, dtype=np.int64)
+    for k in keys:
+        ptr[k + 1] += 1
+    for i in range(n_keys):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    order = np.empty(keys.size, dtype=np.int64)
+    for i in range(keys.size):
+        k = keys[i]
+        order[fill[k]] = i
+        fill[k] += 1
+    return order, ptr
+
+
+@numba.njit(cache=True, nogil=True)
+def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper):
+    """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
+    entries of the rows in ``row_mask`` (``inf`` where no path)."""
+    dist = np.full(sources.size, np.inf)
+    queue = np.empty(sources.size, dtype=np.int64)
+    tail = 0
+    for s in range(sources.size):
+        if sources[s]:
+            dist[s] = 0.0
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if not row_mask[r] or inc_upper[k] <= 0.0:
+                continue
+            s = row_state[r]
+            if dist[s] == np.inf:
+                dist[s] = dist[t] + 1.0
+                queue[tail] = s
+                tail += 1
+    return dist
