@@ -5,7 +5,8 @@ Usage: python benchmarks/safety.py [--runs 50] [--workers 2] [--scenario a] [--s
 Acceptance: no run enters a hazard or leaves the map, and the success rate is at least the
 worst-case satisfaction probability reported at the switch to goal reaching (>= P_sat).
 Prints per-run outcomes, the violation count, the success rate with its 95 % Wilson interval,
-and the mean and minimum p_switch.
+the mean and minimum p_switch, and the runs that left the goal-reaching plan of their switch
+(the runner keeps that plan after the switch, see :mod:`hopper_sim.runner`).
 """
 
 from __future__ import annotations
@@ -46,7 +47,9 @@ def main() -> None:
         print(
             f"run {e.run_index:3d}: {e.outcome:9s} {e.reason:28s} steps {e.steps:4d} "
             f"reward {e.reward:7.1f} switch {e.switch_step} p_switch "
-            f"{'-' if e.p_switch is None else f'{e.p_switch:.3f}'} {e.seconds:.1f} s"
+            f"{'-' if e.p_switch is None else f'{e.p_switch:.3f}'} "
+            f"{'' if e.left_plan_step is None else f'left plan at {e.left_plan_step} '}"
+            f"{e.seconds:.1f} s (longest re-synthesis {e.timings.get('batch_max', 0.0):.2f} s)"
         )
     n = len(ends)
     outcomes = [e.outcome for e in ends]
@@ -73,6 +76,11 @@ def main() -> None:
         print(
             f"success after a switch: {k}/{len(switched)} = {k / len(switched):.3f} "
             f"(95 % Wilson [{lo_s:.3f}, {hi_s:.3f}])"
+        )
+        left = [e for e in switched if e.left_plan_step is not None]
+        print(
+            f"runs that left the goal-reaching plan of their switch: {len(left)}"
+            + (f" (runs {[e.run_index for e in left]})" if left else "")
         )
         for name, rate in (("all runs", succ / n), ("runs that switched", k / len(switched))):
             verdict = "holds" if rate >= p_sw.mean() else "does NOT hold"

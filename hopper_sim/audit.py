@@ -1,25 +1,47 @@
 """Interval soundness audit: do the learned transition intervals contain what MuJoCo does?
 
-Procedure (issue "learning", acceptance):
+Procedure (issue "learning", acceptance), sampling hops the way the navigation loop makes them:
 
-1. One navigation run of the scenario collects departure positions, landing errors and the
-   interstitial velocities the hopper met (:func:`collect_run_data`).
-2. The landing-error GPs are fitted on that data and the transition intervals of the grid
-   abstraction are computed exactly as the runner computes them
-   (:func:`planner.intervals.cell_error_bounds`, :func:`planner.intervals.transition_intervals`).
-3. For each audited (cell, action) pair, ``samples`` hops start from uniformly random points
-   of the cell with velocities drawn from the run's interstitial velocities; the controller
-   computes the touchdown angles for the pair's target with the backup switch off (only that
-   action is allowed), and the hops are simulated in one batch in MuJoCo with the world's
-   terrain field, fresh landing noise and the stance thrust.
-4. For every (cell, action, successor) triple, the empirical frequency of landing in the
-   successor passes when it lies in ``[lower - m, upper + m]``, ``m`` the 99 % binomial margin
-   (:func:`planner.audit.audit_intervals`). Successors the intervals leave out have
-   ``[0, 0]``. Failed hops are counted separately, not as landings.
+1. One navigation run of the scenario collects departure positions, landing errors (relative
+   to the target of the *executed* action, as the runner records them) and the interstitial
+   velocities the hopper had at its departures (:func:`collect_run_data`).
+2. One re-synthesis on that data (:func:`planner.learning.resynthesise`, the runner's
+   settings) fits the landing-error GPs and gives the transition intervals exactly as the loop
+   computes them, and the nonviolating sub-model the loop would plan with.
+3. Start states: a uniformly random point of the pair's cell and a velocity drawn uniformly
+   from the run's departure velocities. At each start state the controller decides as it does
+   in the loop (:meth:`hopper_sim.environment.HopperGridEnv.step`): the audited action is
+   requested, and its backup switch may execute instead the cheapest action of the *loop's
+   allowed set* of that cell (:func:`loop_allowed_actions`: the nonviolating sub-model's
+   actions in the product state in which a run entering the cell is; all enabled actions where
+   that state has none, as in the policy's fallback phase), to which the requested action is
+   added (the controller needs the request among its choices). The hop is simulated in MuJoCo
+   with the world's terrain field, fresh landing noise and the stance thrust, and counts for
+   the pair of the action it **executed** (if that pair is audited and not yet full) — so a
+   hop requested for one pair may fill another, as in the loop.
+4. Drawing goes on in rounds until every audited pair has ``samples`` executed, successful
+   hops, or until the pair's own requests reach ``attempts * samples`` (the attempt cap).
+   Pairs left short are reported (:attr:`SampledAudit.executed`): the controller rarely or
+   never executes that action from the sampled states, because its cost there is above the
+   backup threshold and another allowed action is cheaper.
+5. For every (cell, action, successor) triple of the *full* pairs, the empirical frequency of
+   landing in the successor passes when it lies in ``[lower - m, upper + m]``, ``m`` the 99 %
+   binomial margin (:func:`planner.audit.audit_intervals`, unchanged). Successors the intervals
+   leave out have ``[0, 0]``. Pairs with some but fewer than ``samples`` hops are audited
+   separately with the margin of their own count (:attr:`SampledAudit.partial`). Failed hops
+   (the hopper fell) are counted separately, not as landings.
 
-The audit checks the abstraction *as used*: the GP models the error as a function of the
-departure position only, while the hop also depends on the incoming velocity; a mismatch
-there shows up as failed triples.
+The binomial margin lets a successor that the intervals exclude (``[0, 0]``) be observed with
+a frequency up to ``m`` (0.091 at 200 samples); :func:`excluded_landings` lists such landings
+so that they are reported rather than hidden by the margin.
+
+What the audit claims when it passes: for the audited pairs, the intervals of ``(cell, a)``
+contain (up to the binomial margin) the successor distribution of hops that depart from a
+uniform point of the cell with a velocity of the run's distribution and that **execute**
+``a`` under the loop's controller and allowed set. That is the distribution the abstraction's
+intervals stand for in the loop, where the policy's request can be replaced by the backup. It
+says nothing about hops the controller would not execute (forced reversals against the
+incoming velocity), and the departure velocities are those of one run, not of every run.
 """
 
 from __future__ import annotations
@@ -34,12 +56,13 @@ from hopper_sim.controller.simulator import nominal_energy
 from hopper_sim.environment import HopperGridEnv
 from hopper_sim.events import HopEvent, Observer
 from hopper_sim.noise import sample_model_noise
-from hopper_sim.runner import NavigationRunner, RunnerSettings
+from hopper_sim.runner import NavigationRunner
 from planner.audit import AuditResult
 from planner.audit import audit_intervals as audit
 from planner.gp.landing import LandingErrorGP
-from planner.imdp.grid import ACTIONS
-from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
+from planner.imdp.grid import ACTIONS, GridWorld
+from planner.intervals import TransitionIntervals
+from planner.learning import Resynthesis, resynthesise
 from planner.torch_threads import torch_threads
 
 
@@ -74,83 +97,210 @@ def collect_run_data(runner: NavigationRunner, seed: int) -> RunData:
         runner.run(seed)
     finally:
         runner.observer = previous
+    # the velocity after the last hop is no departure velocity
+    vel = np.array(collector.vel).reshape(-1, 3)[: len(collector.pos)]
     return RunData(
         np.array(collector.pos).reshape(-1, 2),
         np.array(collector.err).reshape(-1, 2),
-        np.array(collector.vel).reshape(-1, 3),
+        vel if len(vel) else np.array(collector.vel).reshape(-1, 3),
     )
+
+
+def loop_allowed_actions(res: Resynthesis, grid: GridWorld) -> np.ndarray:
+    """``(n_cells, n_actions)`` mask: the actions the loop lets the controller choose from in
+    each cell, for the synthesis ``res``: the nonviolating sub-model's allowed actions in the
+    product state :meth:`~planner.imdp.product.ProductIMDP.entry_state` of the cell (for
+    ``!Haz U Goal`` the state of every unfinished run there), or every enabled action where
+    that state has none (the policy's fallback phase)."""
+    cells = np.arange(grid.n_cells)
+    ps = np.array([res.product.entry_state(int(c)) for c in cells], dtype=np.int64)
+    nv = np.asarray(res.nonviolating.actions, dtype=bool)[ps]
+    enabled = grid.enabled[: grid.n_cells]
+    return np.where(nv.any(axis=1, keepdims=True), nv & enabled, enabled)
 
 
 @dataclass(frozen=True)
 class SampledAudit:
-    """The audit of :func:`planner.audit.audit_intervals` on MuJoCo samples, the number of
-    failed hops (not counted as landings), the hops simulated, and the successor counts
-    ``(P, n_states)`` per audited pair."""
+    """The audit of the full pairs (``result``; ``None`` if none filled up), the audit of the
+    pairs with some but fewer than ``samples`` executed hops (``partial``, each with the margin
+    of its own count; ``None`` if there are none), per audited pair the successful executed
+    hops (``executed``, ``(P,)``), its own requests (``requests``) and how many of those the
+    controller executed as requested rather than switching to a backup (``as_requested``), the
+    successor counts
+    ``(P, n_states)``, the failed hops (not counted as landings), and the hops simulated and
+    controller decisions made in all; ``intervals``: the audited transition intervals."""
 
-    result: AuditResult
+    result: AuditResult | None
+    partial: AuditResult | None
+    executed: np.ndarray
+    requests: np.ndarray
+    as_requested: np.ndarray
+    counts: np.ndarray
     failures: int
     hops: int
-    counts: np.ndarray
+    decisions: int
+    samples: int
+    intervals: TransitionIntervals
+
+    @property
+    def full(self) -> np.ndarray:
+        """``(P,)`` mask of the pairs that reached ``samples`` executed hops."""
+        return self.executed >= self.samples
+
+
+def _first_k(group: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Mask keeping, in order, at most ``limit[g]`` entries of each group ``g`` (``group``
+    entries < 0 are never kept)."""
+    keep = np.zeros(group.size, dtype=bool)
+    idx = np.flatnonzero(group >= 0)
+    if idx.size == 0:
+        return keep
+    g = group[idx]
+    order = np.argsort(g, kind="stable")
+    gs = g[order]
+    start = np.flatnonzero(np.r_[True, gs[1:] != gs[:-1]])
+    rank = np.arange(gs.size) - np.repeat(start, np.diff(np.r_[start, gs.size]))
+    keep[idx[order[rank < limit[gs]]]] = True
+    return keep
 
 
 def audit_intervals(
-    env: HopperGridEnv,
+    runner: NavigationRunner,
     data: RunData,
     pairs: np.ndarray,
     *,
     samples: int = 200,
     rng: np.random.Generator,
-    settings: RunnerSettings | None = None,
+    attempts: int = 4,
     confidence: float = 0.99,
     progress: Callable[[int], None] | None = None,
 ) -> SampledAudit:
-    """Audit the intervals learned from ``data`` on ``pairs`` ((P, 2) cell, action ids)."""
-    settings = settings or RunnerSettings()
-    grid = env.grid
+    """Audit the intervals learned from ``data`` on ``pairs`` ((P, 2) distinct cell, action
+    ids), sampling as the loop does (module docstring); ``attempts``: the cap on each pair's
+    own requests, in multiples of ``samples``; ``progress`` gets the number of controller
+    decisions made."""
+    env, grid, settings = runner.env, runner.grid, runner.settings
     pairs = np.asarray(pairs, dtype=int).reshape(-1, 2)
+    if samples < 1 or attempts < 1:
+        raise ValueError(f"samples and attempts must be >= 1, got {samples}, {attempts}")
     if pairs.size and not grid.enabled[pairs[:, 0], pairs[:, 1]].all():
         bad = pairs[~grid.enabled[pairs[:, 0], pairs[:, 1]]][0]
         raise ValueError(f"action {ACTIONS[bad[1]]} is not enabled in cell {bad[0]}")
-    gp = LandingErrorGP(settings.gp, seed=0)
-    gp.fit(data.positions, data.errors)
-    pp = env.model.perturbation
-    bounds = cell_error_bounds(
-        gp, grid, samples_per_axis=settings.samples_per_axis, delta=settings.delta
-    )
-    ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
-
     n_pairs = len(pairs)
-    cells = np.repeat(pairs[:, 0], samples)
-    acts = np.repeat(pairs[:, 1], samples)
-    i, j = grid.cell_ij(cells)
-    pos = (np.stack([i, j], axis=1) + rng.random((cells.size, 2))) * grid.cell
-    vel = data.velocities[rng.integers(len(data.velocities), size=cells.size)]
-    targets = grid.target_centres[cells, acts]
-    alpha = np.empty(cells.size)
-    beta = np.empty(cells.size)
-    # the controller solves one departure state at a time (its batch is over targets)
+    pair_index = np.full((grid.n_cells, len(ACTIONS)), -1, dtype=np.int64)
+    pair_index[pairs[:, 0], pairs[:, 1]] = np.arange(n_pairs)
+    if len(np.unique(pair_index[pair_index >= 0])) != n_pairs or (
+        n_pairs and (pair_index[pairs[:, 0], pairs[:, 1]] != np.arange(n_pairs)).any()
+    ):
+        raise ValueError("each (cell, action) pair may be audited only once")
     with torch_threads(settings.torch_threads):
-        for k in range(cells.size):
-            d = env.controller.decide(pos[k], vel[k], [acts[k]], targets[k][None], int(acts[k]))
-            alpha[k], beta[k] = d.alpha, d.beta
-            if progress is not None and (k + 1) % samples == 0:
-                progress(samples)
-    nu = sample_model_noise(env.model, rng, cells.size)
-    res = simulate_hops(
-        env.model,
-        vel,
-        alpha,
-        beta,
-        pos=pos,
-        terrain=env.terrain,
-        noise=nu,
-        thrust=True,
-        nominal_energy=nominal_energy(env.model, env.controller.steady.speed),
-    )
-    landed = grid.locate(res.next_pos[res.ok])
-    pair_id = np.repeat(np.arange(n_pairs), samples)[res.ok]
+        res = resynthesise(
+            LandingErrorGP(settings.gp, seed=0),
+            grid,
+            runner.automaton,
+            data.positions,
+            data.errors,
+            reward=env.reward_table,
+            initial_cell=runner.scenario.start_cell,
+            settings=runner.synthesis_settings,
+        )
+    allowed = loop_allowed_actions(res, grid)
+    energy = nominal_energy(env.model, env.controller.steady.speed)
+
+    executed = np.zeros(n_pairs, dtype=np.int64)
+    requests = np.zeros(n_pairs, dtype=np.int64)
+    as_requested = np.zeros(n_pairs, dtype=np.int64)
     counts = np.zeros((n_pairs, grid.n_states), dtype=np.int64)
-    np.add.at(counts, (pair_id, landed), 1)
-    sampled = counts.sum(axis=1) > 0
-    result = audit(ti, pairs[sampled, 0], pairs[sampled, 1], counts[sampled], confidence=confidence)
-    return SampledAudit(result, int((~res.ok).sum()), int(cells.size), counts)
+    failures = hops = decisions = 0
+    cap = attempts * samples
+    while True:
+        n_req = np.where(executed < samples, np.minimum(samples - executed, cap - requests), 0)
+        if not (n_req > 0).any():
+            break
+        req_pair = np.repeat(np.arange(n_pairs), n_req)
+        requests += n_req
+        cells, acts = pairs[req_pair, 0], pairs[req_pair, 1]
+        i, j = grid.cell_ij(cells)
+        pos = (np.stack([i, j], axis=1) + rng.random((cells.size, 2))) * grid.cell
+        vel = data.velocities[rng.integers(len(data.velocities), size=cells.size)]
+        ex = np.empty(cells.size, dtype=np.int64)
+        alpha = np.empty(cells.size)
+        beta = np.empty(cells.size)
+        # the controller solves one departure state at a time (its batch is over targets)
+        with torch_threads(settings.torch_threads):
+            for k in range(cells.size):
+                choice = allowed[cells[k]].copy()
+                choice[acts[k]] = True
+                ids = np.flatnonzero(choice)
+                d = env.controller.decide(
+                    pos[k], vel[k], ids, grid.target_centres[cells[k], ids], int(acts[k])
+                )
+                ex[k], alpha[k], beta[k] = d.executed, d.alpha, d.beta
+                if progress is not None:
+                    progress(1)
+        decisions += cells.size
+        as_requested += np.bincount(req_pair[ex == acts], minlength=n_pairs)
+        ex_pair = pair_index[cells, ex]
+        keep = _first_k(ex_pair, samples - executed)
+        if not keep.any():
+            continue
+        nu = sample_model_noise(env.model, rng, int(keep.sum()))
+        out = simulate_hops(
+            env.model,
+            vel[keep],
+            alpha[keep],
+            beta[keep],
+            pos=pos[keep],
+            terrain=env.terrain,
+            noise=nu,
+            thrust=True,
+            nominal_energy=energy,
+        )
+        hops += int(keep.sum())
+        failures += int((~out.ok).sum())
+        pid = ex_pair[keep][out.ok]
+        np.add.at(counts, (pid, grid.locate(out.next_pos[out.ok])), 1)
+        executed += np.bincount(pid, minlength=n_pairs)
+
+    def sub_audit(mask: np.ndarray) -> AuditResult | None:
+        if not mask.any():
+            return None
+        return audit(
+            res.intervals, pairs[mask, 0], pairs[mask, 1], counts[mask], confidence=confidence
+        )
+
+    full = executed >= samples
+    return SampledAudit(
+        result=sub_audit(full),
+        partial=sub_audit(~full & (executed > 0)),
+        executed=executed,
+        requests=requests,
+        as_requested=as_requested,
+        counts=counts,
+        failures=failures,
+        hops=hops,
+        decisions=decisions,
+        samples=samples,
+        intervals=res.intervals,
+    )
+
+
+def excluded_landings(audit_: SampledAudit, pairs: np.ndarray) -> np.ndarray:
+    """``(K, 5)`` rows ``(cell, action, successor, count, executed)``: the landings of
+    ``pairs`` (the audited pairs, in order) in successors whose interval upper bound is 0 (no
+    interval row, or an upper bound of 0), with the pair's executed hops, most frequent
+    (``count / executed``) first."""
+    ti = audit_.intervals
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    upper = np.zeros(audit_.counts.shape)
+    n_actions = int(max(ti.action.max(initial=0), pairs[:, 1].max(initial=0))) + 1
+    code = pairs[:, 0] * n_actions + pairs[:, 1]
+    order = np.argsort(code)
+    row_code = ti.state * n_actions + ti.action
+    pos = np.minimum(np.searchsorted(code[order], row_code), max(len(code) - 1, 0))
+    hit = (len(code) > 0) & (code[order][pos] == row_code)
+    upper[order[pos[hit]], ti.successor[hit]] = ti.upper[hit]
+    r, c = np.nonzero((audit_.counts > 0) & (upper <= 0.0))
+    n = audit_.executed[r]
+    out = np.stack([pairs[r, 0], pairs[r, 1], c, audit_.counts[r, c], n], axis=1)
+    return out[np.argsort(-audit_.counts[r, c] / np.maximum(n, 1), kind="stable")]

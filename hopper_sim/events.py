@@ -181,6 +181,10 @@ class RunEnd:
             single re-synthesis).
         reason: what ended the run in words (``"hazard"``, ``"left the map"``,
             ``"hop failed: ..."``, ``"specification satisfied"``, ``"step cap"``...).
+        left_plan_step: the hop at which the robot left the goal-reaching plan of the switch
+            (its state had no action in that plan's satisfying sub-model; the policy went back
+            to exploration), or ``None`` if it never did: only a run with ``None`` here was
+            held to the guarantee ``p_switch`` to the end (:mod:`planner.policy`).
     """
 
     run_index: int
@@ -193,6 +197,7 @@ class RunEnd:
     seconds: float
     timings: dict[str, float] = field(default_factory=dict)
     reason: str = ""
+    left_plan_step: int | None = None
 
     def __post_init__(self) -> None:
         _check_choice("outcome", self.outcome, OUTCOMES)

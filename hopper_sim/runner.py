@@ -13,7 +13,14 @@ One run (the paper's "Synthesis Approach", DESIGN.md "Rewards and policies"):
    terrain field, noise and thrust; the departure position and the landing error
    ``landing - target`` are recorded; the automaton reads the label of the cell landed in.
 3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
-   abstraction and policies re-synthesised.
+   abstraction and policies re-synthesised. After the switch to goal reaching the data are
+   still recorded and the model re-synthesised, but the goal-reaching plan of the switch is
+   kept (:class:`~planner.policy.SwitchingPolicy`, ``keep_goal_plan``): the reported
+   ``p_switch`` is the worst-case satisfaction probability of that plan on the IMDP of the
+   switch, and the run is held to it. Only if the robot lands in a product state outside that
+   plan's satisfying sub-model does it leave the plan (back to exploration with the latest
+   synthesis, which may switch again); :attr:`~hopper_sim.events.RunEnd.left_plan_step`
+   reports when.
 4. The run ends in success when the automaton reaches an accepting sink (for ``!Haz U Goal``:
    the goal), in violation on a hazard cell, off the map, in a rejecting automaton sink, or
    when a hop fails (the hopper fell), and in a timeout at ``max_steps`` hops.
@@ -328,6 +335,7 @@ class NavigationRunner:
             seconds=self.clock() - t_start,
             timings=timings,
             reason=reason,
+            left_plan_step=policy.left_plan_step,
         )
         self.observer.on_run_end(end)
         return end

@@ -13,9 +13,31 @@ of a sub-model, so that no mix of the two trades away safety:
 
 Switch: at a decision in state ``q``, exploration turns into goal reaching as soon as the
 worst-case satisfaction probability of ``q`` *exceeds* ``P_sat`` and the satisfying sub-model
-allows an action in ``q``. The phase then stays goal reaching; only if a later re-synthesis
-leaves the current state without an allowed goal-reaching action does the policy fall back to
-exploration (reported in the decision), and it switches again under the same rule.
+allows an action in ``q``. That probability, ``p_switch``, is a statement about the IMDP and
+the goal-reaching plan *of that synthesis*; so, by default
+(``SwitchingSettings.keep_goal_plan``), the goal-reaching plan of the switch is kept for the
+rest of the run: later re-syntheses replace the exploration and fallback plans and the
+satisfaction probabilities used for the next switch, but not the plan being followed, so the
+run is held to the guarantee it reported. The phase stays goal reaching while the current state
+has an allowed action in that plan (the switch's satisfying sub-model). If the robot lands in a
+state outside it (possible: the satisfying sub-model keeps every action whose worst-case value
+exceeds ``P_sat``, not only the optimal one, and the real system may fall outside the
+intervals), the policy *leaves the plan*: it records the step
+(:attr:`SwitchingPolicy.left_plan_step`, which a runner must report), returns to exploration
+with the latest plans and may switch again under the same rule (with a new plan;
+``switch_step`` and ``p_switch`` stay those of the first switch). With
+``keep_goal_plan=False`` every re-synthesis replaces the goal plan too (the guarantee then
+refers to a model that changes under the run), and the policy returns to exploration where
+the latest plan has no action.
+
+What ``p_switch`` promises: following the kept plan's LTL action from the switch state
+satisfies the formula with probability at least ``p_switch`` under every adversary of the
+switch's IMDP (and so on the real system if its intervals are sound). The goal-reaching policy
+also takes RL actions (probability ``C exp(-eps m)``), only among actions whose worst-case value
+under that IMDP exceeds ``P_sat``; an RL action can thus lower the guarantee towards ``P_sat``,
+and a run that then lands outside the satisfying sub-model is the case reported by
+``left_plan_step``. The promise has no time bound: a runner's step cap may still end a run
+that follows the plan (a timeout).
 
 Fallback: where the nonviolating sub-model allows no action in the current state (typically at
 the start, when the prior's wide intervals let every hop possibly leave the world or reach a
@@ -111,8 +133,10 @@ class Decision:
         allowed: the allowed actions in this state (the backup controller picks among them).
         p_rl: the probability with which the RL action was to be taken.
         phase_step: ``m``, the number of earlier steps in the current phase.
-        sat_probability: worst-case satisfaction probability of the state.
-        switched: this decision switched the phase (to goal reaching, or back).
+        sat_probability: worst-case satisfaction probability of the state (in goal reaching:
+            under the synthesis of the plan in use).
+        switched: this decision switched the phase or the plan (to goal reaching, back, or
+            out of a plan it left into a new one).
     """
 
     action: int
@@ -176,12 +200,15 @@ class GoalReachingPolicy:
 
 @dataclass(frozen=True)
 class SwitchingSettings:
-    """``p_rl_explore`` = P_RL,ee; ``c``, ``eps`` of P_RL,gr = C exp(-eps m); ``p_sat``."""
+    """``p_rl_explore`` = P_RL,ee; ``c``, ``eps`` of P_RL,gr = C exp(-eps m); ``p_sat``;
+    ``keep_goal_plan``: follow the goal-reaching plan of the switch until the state leaves it
+    (default) instead of the latest re-synthesis's (see the module docstring)."""
 
     p_rl_explore: float = 0.5
     c: float = 0.5
     eps: float = 0.005
     p_sat: float = 0.65
+    keep_goal_plan: bool = True
 
     def __post_init__(self) -> None:
         for name in ("p_rl_explore", "c", "eps", "p_sat"):
@@ -199,17 +226,28 @@ class SwitchingPolicy:
         self.rl = rl
         self.exploration: ExplorationPolicy | None = None
         self.goal: GoalReachingPolicy | None = None
+        self.latest_goal: GoalReachingPolicy | None = None
         self.fallback: ExplorationPolicy | None = None
         self.sat_probability: np.ndarray | None = None
+        self.goal_sat_probability: np.ndarray | None = None
         self.reset()
 
     def reset(self) -> None:
-        """Start a new run: exploration phase, no steps taken."""
+        """Start a new run: exploration phase, no steps taken, the latest plans in use."""
         self.phase = EXPLORATION
         self.phase_step = 0
         self.step = 0
         self.switch_step: int | None = None
         self.switch_probability: float | None = None
+        self.left_plan_step: int | None = None
+        self.switches = 0
+        self.goal = self.latest_goal
+        self.goal_sat_probability = self.sat_probability
+
+    @property
+    def following_switch_plan(self) -> bool:
+        """Whether the goal-reaching plan in use is kept from a switch (not replaced)."""
+        return self.phase == GOAL_REACHING and self.settings.keep_goal_plan
 
     def resynthesise(
         self,
@@ -220,7 +258,8 @@ class SwitchingPolicy:
         rl: RLActor | None = None,
     ) -> None:
         """Install the plans of a new synthesis (phase and step counters are kept); ``rl``
-        replaces the RL actor when given."""
+        replaces the RL actor when given. In goal reaching with ``keep_goal_plan`` the
+        goal-reaching plan of the switch stays in use (the new one is kept for later)."""
         if rl is not None:
             self.rl = rl
         if self.rl is None:
@@ -238,24 +277,44 @@ class SwitchingPolicy:
         sat = np.clip(sat, 0.0, 1.0)
         s = self.settings
         self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore)
-        self.goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)
+        self.latest_goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)
         self.fallback = None if fallback is None else ExplorationPolicy(fallback, self.rl, 0.0)
         self.sat_probability = sat
+        if not self.following_switch_plan:
+            self.goal, self.goal_sat_probability = self.latest_goal, sat
+        elif self.goal is not None:
+            # the kept plan acts with the current RL actor (its allowed actions are the plan's)
+            self.goal = GoalReachingPolicy(self.goal.plan, self.rl, s.c, s.eps)
 
     def decide(self, state: int, rng: np.random.Generator) -> Decision:
         """Choose the action in (product) state ``state``."""
-        if self.exploration is None or self.goal is None or self.sat_probability is None:
+        if (
+            self.exploration is None
+            or self.goal is None
+            or self.latest_goal is None
+            or self.sat_probability is None
+            or self.goal_sat_probability is None
+        ):
             raise PolicyError("decide called before resynthesise")
         if not 0 <= state < self.sat_probability.size:
             raise PolicyError(f"state {state} is not in [0, {self.sat_probability.size})")
-        sat = float(self.sat_probability[state])
-        goal_ok = bool(np.asarray(self.goal.plan.allowed[state]).any())
         switched = False
+        if self.phase == GOAL_REACHING and not np.asarray(self.goal.plan.allowed[state]).any():
+            # the state left the goal-reaching plan in use: back to exploration, latest plans
+            self.phase, self.phase_step, switched = EXPLORATION, 0, True
+            if self.settings.keep_goal_plan and self.left_plan_step is None:
+                self.left_plan_step = self.step
+            self.goal, self.goal_sat_probability = self.latest_goal, self.sat_probability
+        sat = float(self.sat_probability[state])
+        goal_ok = bool(np.asarray(self.latest_goal.plan.allowed[state]).any())
         if self.phase == EXPLORATION and sat > self.settings.p_sat and goal_ok:
             self.phase, self.phase_step, switched = GOAL_REACHING, 0, True
-            self.switch_step, self.switch_probability = self.step, sat
-        elif self.phase == GOAL_REACHING and not goal_ok:
-            self.phase, self.phase_step, switched = EXPLORATION, 0, True
+            self.goal, self.goal_sat_probability = self.latest_goal, self.sat_probability
+            self.switches += 1
+            if self.switch_step is None:
+                self.switch_step, self.switch_probability = self.step, sat
+        if self.phase == GOAL_REACHING:
+            sat = float(self.goal_sat_probability[state])
         explore_ok = bool(np.asarray(self.exploration.plan.allowed[state]).any())
         phase = self.phase
         if self.phase == GOAL_REACHING:

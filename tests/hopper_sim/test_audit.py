@@ -1,24 +1,58 @@
-"""A small interval soundness audit in MuJoCo (the full one: benchmarks/audit_intervals.py)."""
+"""A small interval soundness audit in MuJoCo, sampled as the loop samples (the full one:
+benchmarks/audit_intervals.py)."""
 
 import numpy as np
+import pytest
 
-from hopper_sim.audit import audit_intervals, collect_run_data
+from hopper_sim.audit import audit_intervals, collect_run_data, excluded_landings
 from hopper_sim.runner import NavigationRunner
 from planner.scenario import load_scenario
 
 
-def test_small_audit_holds():
+@pytest.fixture(scope="module")
+def run():
     sc = load_scenario("a").with_runner(max_steps=30, batch_size=10)
     runner = NavigationRunner(sc)
-    data = collect_run_data(runner, seed=2)
+    return runner, collect_run_data(runner, seed=2)
+
+
+def test_small_loop_like_audit_holds(run):
+    runner, data = run
     assert len(data.positions) > 0 and data.errors.shape == data.positions.shape
+    assert data.velocities.shape == (len(data.positions), 3)
     grid = runner.grid
-    cells = grid.locate(data.positions[:3])
-    pairs = np.array([[c, a] for c in cells for a in (2, 3)])  # E1, E2 from visited cells
-    pairs = pairs[grid.enabled[pairs[:, 0], pairs[:, 1]]]
-    res = audit_intervals(runner.env, data, pairs, samples=40, rng=np.random.default_rng(1))
-    assert res.hops == 40 * len(pairs)
-    assert res.counts.sum() + res.failures == res.hops
+    cells = np.unique(grid.locate(data.positions[:4]))[:2]
+    pairs = np.array([[c, a] for c in cells for a in np.flatnonzero(grid.enabled[c])])
+    samples, attempts = 30, 2
+    res = audit_intervals(
+        runner, data, pairs, samples=samples, attempts=attempts, rng=np.random.default_rng(1)
+    )
+    # bookkeeping: hops count for the pair of the action they executed, never beyond samples
+    assert (res.executed <= samples).all() and (res.requests <= attempts * samples).all()
+    np.testing.assert_array_equal(res.counts.sum(axis=1), res.executed)
+    assert res.hops == res.executed.sum() + res.failures
     assert res.failures <= res.hops // 20
-    assert res.result.num_triples >= len(pairs)
-    assert res.result.fraction >= 0.95, res.result.offenders[:3]
+    assert res.decisions >= res.hops and res.decisions == res.requests.sum()
+    assert res.full.sum() >= len(pairs) // 2  # most actions get executed from these states
+    assert res.result is not None and res.result.num_triples >= int(res.full.sum())
+    assert res.result.fraction >= 0.99, res.result.offenders[:3]
+    # landings the intervals exclude are listed, not hidden by the margin
+    ti = res.intervals
+    for c, a, succ, k, n in excluded_landings(res, pairs):
+        row = (ti.state == c) & (ti.action == a) & (ti.successor == succ)
+        assert not (ti.upper[row] > 0).any() and 0 < k <= n
+        p = int(np.flatnonzero((pairs[:, 0] == c) & (pairs[:, 1] == a))[0])
+        assert res.counts[p, succ] == k and res.executed[p] == n
+
+
+def test_audit_rejects_bad_pairs(run):
+    runner, data = run
+    grid = runner.grid
+    corner = 0  # cell (0, 0): S1 (index 4) leaves the world
+    with pytest.raises(ValueError, match="not enabled"):
+        audit_intervals(runner, data, [[corner, 4]], samples=1, rng=np.random.default_rng(0))
+    ok = int(np.flatnonzero(grid.enabled[corner])[0])
+    with pytest.raises(ValueError, match="only once"):
+        audit_intervals(
+            runner, data, [[corner, ok], [corner, ok]], samples=1, rng=np.random.default_rng(0)
+        )

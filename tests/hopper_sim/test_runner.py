@@ -86,7 +86,16 @@ def test_same_seed_same_run(short_a, env):
 
     (e1, l1, a1), (e2, l2, a2) = go(), go()
     assert np.array_equal(l1, l2) and a1 == a2
-    same = ("outcome", "steps", "reward", "switch_step", "p_switch", "backups", "reason")
+    same = (
+        "outcome",
+        "steps",
+        "reward",
+        "switch_step",
+        "p_switch",
+        "backups",
+        "reason",
+        "left_plan_step",
+    )
     assert all(getattr(e1, f) == getattr(e2, f) for f in same)
 
 
@@ -122,3 +131,19 @@ def test_unknown_reward_learner_carries_over(short_a, env):
     assert runner.learner is not None
     landed = sum(e.steps - e.reason.startswith("hop failed") for e in ends)
     assert runner.learner.reward_count.sum() == landed
+
+
+@pytest.mark.parametrize("seed", [16, 18])
+def test_goal_plan_of_the_switch_is_followed_to_the_goal(seed):
+    # seed 18 used to time out (a re-synthesis after the switch dropped its state from the
+    # satisfying sub-model and it explored until the cap); seed 16 hit a hazard when the run
+    # was kept in goal reaching with a generic fallback action instead
+    sc = load_scenario("a")
+    obs = Collect()
+    end = NavigationRunner(sc, observer=obs).run(seed=seed)
+    assert end.reason not in ("hazard", "left the map")
+    assert end.switch_step is not None and end.p_switch > sc.p_sat
+    assert end.left_plan_step is None
+    hops = [e for k, e in obs.events if k == "hop"]
+    assert {h.phase for h in hops[end.switch_step :]} == {"goal_reaching"}
+    assert end.outcome == "success"

@@ -64,15 +64,53 @@ def test_switch_when_worst_case_probability_exceeds_p_sat():
     assert policy.switch_step == 2 and policy.switch_probability == pytest.approx(0.7)
     d = policy.decide(0, rng)  # stays in goal reaching where the probability is low again
     assert d.phase == GOAL_REACHING and not d.switched and d.phase_step == 1
-    # a re-synthesis that leaves state 5 without goal-reaching actions: back to exploration
-    allowed = goal.allowed.copy()
-    allowed[5] = False
-    ltl = np.where(np.arange(N) == 5, -1, goal.ltl_action)
-    policy.resynthesise(explore, PhasePlan(allowed, ltl), sat)
-    d = policy.decide(5, rng)
-    assert d.phase == EXPLORATION and d.switched
     policy.reset()
     assert policy.phase == EXPLORATION and policy.switch_step is None
+
+
+def _without(plan: PhasePlan, states: list[int]) -> PhasePlan:
+    allowed = plan.allowed.copy()
+    allowed[states] = False
+    return PhasePlan(allowed, np.where(np.isin(np.arange(N), states), -1, plan.ltl_action))
+
+
+def test_goal_plan_of_the_switch_is_kept_until_the_state_leaves_it():
+    policy, explore, goal = _policy(p_sat=0.65)
+    sat = np.full(N, 0.9)
+    policy.resynthesise(explore, goal, sat)
+    rng = np.random.default_rng(0)
+    assert policy.decide(3, rng).switched and policy.switch_probability == pytest.approx(0.9)
+    # a re-synthesis that drops state 5 from the goal plan does not replace the kept plan
+    later = _without(goal, [5])
+    policy.resynthesise(explore, later, np.full(N, 0.2))
+    d = policy.decide(5, rng)
+    assert d.phase == GOAL_REACHING and not d.switched and goal.allowed[5, d.action]
+    assert d.sat_probability == pytest.approx(0.9)  # under the synthesis of the switch
+    assert policy.left_plan_step is None
+    # a state outside the kept plan: the run leaves it (reported), back to exploration
+    policy.reset()
+    policy.resynthesise(explore, _without(goal, [7]), sat)
+    assert policy.decide(3, rng).phase == GOAL_REACHING
+    policy.resynthesise(explore, goal, np.full(N, 0.2))
+    d = policy.decide(7, rng)
+    assert d.phase == EXPLORATION and d.switched and policy.left_plan_step == 1
+    assert policy.switch_step == 0 and policy.switches == 1
+    # from there the latest synthesis may switch again; the first switch stays reported
+    policy.resynthesise(explore, goal, sat)
+    d = policy.decide(7, rng)
+    assert d.phase == GOAL_REACHING and d.switched and policy.switches == 2
+    assert policy.switch_step == 0 and policy.left_plan_step == 1
+
+
+def test_replanning_goal_reaching_returns_to_exploration():
+    policy, explore, goal = _policy(p_sat=0.65, keep_goal_plan=False)
+    sat = np.full(N, 0.9)
+    policy.resynthesise(explore, goal, sat)
+    rng = np.random.default_rng(0)
+    assert policy.decide(3, rng).phase == GOAL_REACHING
+    policy.resynthesise(explore, _without(goal, [5]), np.full(N, 0.2))
+    d = policy.decide(5, rng)
+    assert d.phase == EXPLORATION and d.switched and policy.left_plan_step is None
 
 
 def test_rl_probabilities_follow_the_settings():
