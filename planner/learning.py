@@ -19,9 +19,8 @@ Steps (DESIGN.md "Rewards and policies"), timed separately:
    satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust
    Q-values on the nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown
    reward: the learner's warm-started sweep on its learned rewards); a fallback plan for
-   states without a nonviolating action: every enabled action allowed, the LTL action
-   maximising the worst-case satisfaction probability (the best-case one where the worst
-   case is 0).
+   states without a nonviolating action (:func:`fallback_strategy`): every enabled action
+   allowed, the LTL action the safest way back.
 
 The result holds everything a runner needs to act: the two :class:`PhasePlan` objects, the
 worst-case satisfaction probabilities and the RL actor, ready for
@@ -40,9 +39,10 @@ from scipy.sparse.csgraph import dijkstra
 from planner.automaton import RabinAutomaton
 from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
-from planner.imdp import IMDP, Solution, graph
+from planner.imdp import IMDP, Problem, ReachAvoid, Solution, Specification, graph, solve
 from planner.imdp.graph import SubModel
 from planner.imdp.grid import GridWorld
+from planner.imdp.model import first_of_runs
 from planner.imdp.product import MecChoice, ProductIMDP
 from planner.intervals import (
     CellErrorBounds,
@@ -135,6 +135,62 @@ class Resynthesis:
     synthesis_detail: dict[str, float]
 
 
+def fallback_strategy(
+    product: ProductIMDP, satisfaction: Solution, nonviolating: SubModel
+) -> np.ndarray:
+    """The action for states without a nonviolating action, in this order of preference:
+
+    1. where the worst-case satisfaction probability is positive, the action maximising it;
+    2. else, where some action returns to the nonviolating sub-model without passing a
+       failure state with positive worst-case probability, the action maximising that
+       probability (``(!fail) U nonviolating``, pessimistic);
+    3. else the action whose worst-case probability of entering a failure state in this
+       very hop, ``min(sum_fail u_j, 1 - sum_other l_j)``, is least, then whose summed
+       upper bound into failure states ``sum_fail u_j`` is least (ties: the action that
+       maximises the best-case satisfaction probability, if it is among them).
+
+    Without 2 and 3, states whose worst case is 0 everywhere (unexplored, wide intervals)
+    would take the best-case optimal action, and under wide intervals every action ties at
+    best-case probability 1, hops aimed straight at a hazard included.
+
+    Returns ``(n_states,)`` actions (-1 where a state has none).
+    """
+    pm = product.model
+    best = satisfaction.strategy.copy()
+    open_ = (satisfaction.values <= 0.0) | (best < 0)
+    if not open_.any():
+        return best
+    fail = product.failure_states()
+    back = solve(Problem(pm, Specification(ReachAvoid(nonviolating.states & ~fail, fail))))
+    use_back = open_ & (back.values > 0.0) & (back.strategy >= 0)
+    best = np.where(use_back, back.strategy, best)
+    rest = open_ & ~use_back
+    if rest.any():
+        into = fail[pm.successor]
+        fail_up = np.add.reduceat(np.where(into, pm.upper, 0.0), pm.row_ptr[:-1])
+        other_lo = np.add.reduceat(np.where(into, 0.0, pm.lower), pm.row_ptr[:-1])
+        risk = np.minimum(fail_up, 1.0 - other_lo)
+        least = np.minimum.reduceat(risk, pm.state_ptr[:-1])
+        safest = risk <= least[pm.row_state] + 1e-12
+        # under wide intervals every hop may fail at once: then the least summed upper
+        # bound into failure states (the hop not aimed at them) decides
+        up_safest = np.where(safest, fail_up, np.inf)
+        least_up = np.minimum.reduceat(up_safest, pm.state_ptr[:-1])
+        safest &= up_safest <= least_up[pm.row_state] + 1e-12
+        optimistic = product.satisfaction(pessimistic=False).strategy
+        prefer = safest & (pm.row_action == optimistic[pm.row_state])
+        first_safe = np.full(pm.n_states, -1, dtype=np.int64)
+        safe_rows = np.flatnonzero(safest)
+        first = safe_rows[first_of_runs(pm.row_state[safe_rows])]
+        first_safe[pm.row_state[first]] = pm.row_action[first]
+        pref_rows = np.flatnonzero(prefer)
+        has_pref = np.zeros(pm.n_states, dtype=bool)
+        has_pref[pm.row_state[pref_rows]] = True
+        pick = np.where(has_pref, optimistic, first_safe)
+        best = np.where(rest, pick, best)
+    return best
+
+
 def resynthesise(
     gp: LandingErrorGP,
     grid: GridWorld,
@@ -221,9 +277,7 @@ def resynthesise(
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)
     lap("steering")
-    best = satisfaction.strategy
-    if (best < 0).any():
-        best = np.where(best >= 0, best, product.satisfaction(pessimistic=False).strategy)
+    best = fallback_strategy(product, satisfaction, nonviolating)
     lap("fallback")
     satisfying = product.satisfying(s.p_sat, satisfaction)
     goal = product.goal_strategy(allowed=satisfying.actions)

@@ -136,3 +136,39 @@ def test_exploration_candidates_setting():
     assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
     with pytest.raises(PolicyError, match="candidates"):
         ResynthesisSettings(candidates="all")
+
+
+def test_fallback_never_aims_at_a_hazard_when_another_hop_does_not():
+    # under the prior every hop near the wall may end in a hazard or off the world, so these
+    # states have no nonviolating action and worst case 0; the fallback must still prefer
+    # the hop least likely to violate at once (the best-case-optimal choice ties across all
+    # hops under such wide intervals, and in the top row the first enabled action, E1,
+    # walked a run along the edge into a wall)
+    labels = np.empty((N, N), dtype=object)
+    for y in range(4, N):
+        labels[4, y] = "Haz"  # a wall from the top edge down to y = 4
+    labels[N - 1, 0] = "Goal"
+    grid = GridWorld(N, N, 1.0, labels=labels)
+    r = resynthesise(
+        LandingErrorGP(),
+        grid,
+        until_automaton(),
+        np.zeros((0, 2)),
+        np.zeros((0, 2)),
+        reward=np.zeros(grid.n_states),
+    )
+    pm = r.product.model
+    haz = np.array(["Haz" in grid.labels[c] for c in range(grid.n_cells)] + [True])
+    checked = 0
+    for ps in range(pm.n_states):
+        cell = int(r.product.base_state[ps])
+        if cell >= grid.n_cells or haz[cell] or r.exploration.allowed[ps].any():
+            continue
+        if r.product.automaton_state[ps] != r.product.entry_state(cell) % r.product.n_q:
+            continue
+        act = int(r.fallback.ltl_action[ps])
+        targets = grid.target_cell[cell, grid.enabled[cell]]
+        if (~haz[targets]).any():
+            assert grid.enabled[cell, act] and not haz[grid.target_cell[cell, act]], (cell, act)
+            checked += 1
+    assert checked >= 3
