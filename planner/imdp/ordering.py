@@ -119,7 +119,6 @@ class OrderingAdversary:
         self._succ = np.empty(entries.size, dtype=np.int64)
         self._prob = np.empty(entries.size, dtype=np.float64)
         self._matrix: sp.csr_matrix | None = None
-        self._crit_succ = np.zeros(self.n_rows, dtype=np.int64)
         self.n_sorts = 0
         """How many times rows were (re-)sorted (a full sort counts once)."""
 
@@ -137,13 +136,6 @@ class OrderingAdversary:
         rem = self._remaining[er]
         self._prob[idx] = lo + np.clip(rem - before, 0.0, gap)
         self._succ[idx] = self._successor[perm]
-        # critical successor of each row: where the cumulative gap reaches the remaining
-        # mass (the last one if it never does); its value is the dual threshold t
-        last = np.ones(er.size, dtype=bool)
-        last[:-1] = er[1:] != er[:-1]
-        cand = np.flatnonzero((before + gap >= rem) | last)
-        first = cand[first_of_runs(er[cand])]
-        self._crit_succ[er[first]] = self._successor[perm[first]]
 
     def _sort_all(self, keys: np.ndarray) -> None:
         m = self.model
@@ -197,33 +189,6 @@ class OrderingAdversary:
         """``min`` (or ``max``) over the intervals of ``sum_j p_j values_j`` for every row."""
         values = np.asarray(values, dtype=np.float64)
         return self.matrix(values) @ values
-
-    def lower_bound(self, values: np.ndarray) -> np.ndarray:
-        """A lower bound of :meth:`expectation` from the stored (possibly stale) order, with
-        no sorting; exact while the order is still right.
-
-        Maximising adversary: the stored distribution is feasible, so its expectation is
-        at most the maximum. Minimising adversary: by LP duality, for every threshold
-        ``t``, ``sum_j l_j v_j + (1 - sum l) t - sum_j (u_j - l_j) max(t - v_j, 0)`` is at
-        most the minimum; ``t`` is the value of the row's stored critical successor.
-        """
-        values = np.asarray(values, dtype=np.float64)
-        if self._perm is None:
-            self.update(values)
-        assert self._matrix is not None
-        if not self.minimize:
-            return self._matrix @ values
-        if self.n_rows == 0:
-            return np.zeros(0)
-        t = values[self._crit_succ]
-        vs = values[self._successor]
-        # per entry: l_j v_j - (u_j - l_j) max(t - v_j, 0), summed per row
-        short = np.repeat(t, self._lens) - vs
-        np.maximum(short, 0.0, out=short)
-        short *= self._gap
-        vs *= self._lower
-        vs -= short
-        return np.add.reduceat(vs, self._row_ptr[:-1]) + self._remaining * t
 
 
 def worst_case_expectation(model: IMDP, values: np.ndarray) -> np.ndarray:

@@ -388,7 +388,7 @@ def _reach_sweeps(
     The free states are visited in order of their graph distance to the value-1 states
     (targets, and states of worst-case value 1), each update reading the values written
     before it in the same sweep (:class:`planner.imdp.kernels.ReachSweeper`, compiled), with
-    the exact adversary (every row re-sorted for the current values) and ``max(old, new)``.
+    the exact adversary for the current values and ``max(old, new)``.
     Starting from ``V_0 <= T(V_0)``, every update stays below the least fixed point and the
     values only increase, which is what makes zero lower bounds and end components safe.
     For a maximising strategy only every ``_FULL_EVERY``-th sweep evaluates all rows (and
