@@ -132,6 +132,7 @@ class ProductIMDP:
         )
         self._accepting: list[EndComponent] | None = None
         self._satisfaction: Solution | None = None
+        self._failure: np.ndarray | None = None
 
     # ------------------------------------------------------------------ indexing
     @property
@@ -185,12 +186,14 @@ class ProductIMDP:
     def failure_states(self) -> np.ndarray:
         """States with best-case probability 0 of satisfying the formula (graph-exact):
         no ``upper > 0`` path to an end component that a cooperative adversary keeps
-        visiting some ``G_i`` and no ``B_i``."""
-        target = np.zeros(self.n_states, dtype=bool)
-        for g, b in zip(self.good, self.bad, strict=True):
-            for ec in graph.optimistic_accepting_end_components(self.model, g, b):
-                target[ec.states] = True
-        return ~graph.possible_reach(self.model, target)
+        visiting some ``G_i`` and no ``B_i`` (computed once, then a copy is returned)."""
+        if self._failure is None:
+            target = np.zeros(self.n_states, dtype=bool)
+            for g, b in zip(self.good, self.bad, strict=True):
+                for ec in graph.optimistic_accepting_end_components(self.model, g, b):
+                    target[ec.states] = True
+            self._failure = ~graph.possible_reach(self.model, target)
+        return self._failure.copy()
 
     def satisfaction(
         self,
