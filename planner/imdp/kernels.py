@@ -97,6 +97,15 @@ def _row_value(
 
 
 @numba.njit(cache=True, nogil=True)
+def _scratch(row_ptr):
+    """Scratch arrays for :func:`_sorted_value`, as long as the longest row."""
+    width = 0
+    for r in range(row_ptr.size - 1):
+        width = max(width, row_ptr[r + 1] - row_ptr[r])
+    return np.empty(width, dtype=np.int64), np.empty(width)
+
+
+@numba.njit(cache=True, nogil=True)
 def gauss_seidel_sweep(
     states,
     state_rows,
@@ -124,11 +133,7 @@ def gauss_seidel_sweep(
     sound lower bound.
     """
     sign = 1.0 if adversary_minimizes else -1.0
-    width = 0
-    for r in range(row_ptr.size - 1):
-        width = max(width, row_ptr[r + 1] - row_ptr[r])
-    idx = np.empty(width, dtype=np.int64)
-    keys = np.empty(width)
+    idx, keys = _scratch(row_ptr)
     residual = 0.0
     for k in range(states.size):
         s = states[k]
@@ -406,11 +411,7 @@ def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
 def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
     """The adversary's expectation of ``v`` for every row of the layout."""
     sign = 1.0 if adversary_minimizes else -1.0
-    width = 0
-    for r in range(row_ptr.size - 1):
-        width = max(width, row_ptr[r + 1] - row_ptr[r])
-    idx = np.empty(width, dtype=np.int64)
-    keys = np.empty(width)
+    idx, keys = _scratch(row_ptr)
     out = np.empty(row_ptr.size - 1)
     for r in range(row_ptr.size - 1):
         out[r] = _row_value(
