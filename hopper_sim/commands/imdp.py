@@ -1,8 +1,11 @@
 """``hopnav imdp``: solve an interval MDP file, or convert it to another format.
 
 ``hopnav imdp solve FILE [--format prism|drn|bmdp] [--target LABEL] [--avoid LABEL]
-[--optimistic] [--minimize] [--tolerance T] [--json]`` prints the value per state (the
-maximal probability of ``(!avoid) U target``; worst case unless ``--optimistic``).
+[--optimistic] [--minimize] [--tolerance T] [--uncertified] [--json]`` prints, per state,
+the value and its certified bracket ``lower upper`` (the maximal probability of
+``(!avoid) U target``; worst case unless ``--optimistic``): the solver stops when every
+bracket is narrower than the tolerance. ``--uncertified`` stops on the residual instead
+(faster, no error bound; ``upper`` is then the trivial 1).
 
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
@@ -40,6 +43,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--optimistic", action="store_true", help="best case instead of worst")
     s.add_argument("--minimize", action="store_true", help="minimise instead of maximise")
     s.add_argument("--tolerance", type=float, default=1e-8)
+    s.add_argument(
+        "--uncertified",
+        action="store_true",
+        help="stop on the residual (no error bound) instead of the certified bracket",
+    )
     s.add_argument("--json", action="store_true", help="print a JSON object")
     s.set_defaults(func=run_solve)
 
@@ -67,21 +75,31 @@ def run_solve(args: argparse.Namespace) -> int:
             "optimistic" if args.optimistic else "pessimistic",
             "minimize" if args.minimize else "maximize",
         )
-        sol = solve(Problem(model, spec), ValueIteration(tolerance=args.tolerance))
+        alg = ValueIteration(tolerance=args.tolerance, certified=not args.uncertified)
+        sol = solve(Problem(model, spec), alg)
     except PlannerError as err:
         print(f"hopnav imdp solve: {err}", file=sys.stderr)
         return 1
     if args.json:
         out = {
             "values": sol.values.tolist(),
+            "lower": sol.lower.tolist(),
+            "upper": sol.upper.tolist(),
+            "converged": sol.converged,
             "residual": sol.residual,
             "iterations": sol.iterations,
         }
         print(json.dumps(out))
     else:
-        for s, v in enumerate(sol.values):
-            print(f"{s} {v:.12g}")
-        print(f"# residual {sol.residual:.3g}, iterations {sol.iterations}", file=sys.stderr)
+        print("# state value lower upper", file=sys.stderr)
+        for s, (v, lo, hi) in enumerate(zip(sol.values, sol.lower, sol.upper, strict=True)):
+            print(f"{s} {v:.12g} {lo:.12g} {hi:.12g}")
+        state = "certified" if sol.converged and not args.uncertified else "NOT certified"
+        print(
+            f"# bracket width {sol.error:.3g} ({state}), residual {sol.residual:.3g}, "
+            f"iterations {sol.iterations}",
+            file=sys.stderr,
+        )
     return 0
 
 

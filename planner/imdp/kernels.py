@@ -173,6 +173,69 @@ def gauss_seidel_sweep(
     return residual
 
 
+_ROUNDING = 1e-15
+"""Slack of :func:`upper_sweep`'s check for floating-point rounding."""
+
+
+@numba.njit(cache=True, nogil=True)
+def upper_sweep(
+    states,
+    state_rows,
+    row_ptr,
+    remaining,
+    succ,
+    lower,
+    gap,
+    crit,
+    u,
+    maximize,
+    adversary_minimizes,
+):
+    """One Gauss-Seidel pass of ``U(s) <- T(U)(s)`` from above, in place, that only ever
+    lowers ``U``: a state whose Bellman value exceeds ``U(s)`` keeps ``U(s)`` and counts as
+    a violation. Returns ``(max decrease, violations)``.
+
+    A value above ``U(s)`` by at most ``_ROUNDING`` (1e-15, floating-point noise of the
+    row sums) keeps ``U(s)`` without counting.
+    A pass with no violation certifies the final ``U`` as superharmonic, ``T(U) <= U``:
+    each state's value was computed from values at least the final ones (they only
+    decrease) and ``T`` is monotone. For reachability every superharmonic ``U`` (with the
+    targets at 1) is at least the least fixed point, i.e. an upper bound of the values.
+    """
+    sign = 1.0 if adversary_minimizes else -1.0
+    idx, keys = _scratch(row_ptr)
+    decrease = 0.0
+    violations = 0
+    for k in range(states.size):
+        s = states[k]
+        best = -np.inf if maximize else np.inf
+        for r in range(state_rows[k], state_rows[k + 1]):
+            q = _row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                u,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if (q > best) if maximize else (q < best):
+                best = q
+        old = u[s]
+        if best <= old:
+            u[s] = best
+            if old - best > decrease:
+                decrease = old - best
+        elif best > old + _ROUNDING:
+            violations += 1
+    return decrease, violations
+
+
 @numba.njit(cache=True, nogil=True)
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
@@ -240,6 +303,7 @@ class ReachSweeper:
         self.lower = m.lower[ent].astype(np.float64)
         self.gap = m.upper[ent] - self.lower
         self.crit = self.row_ptr[:-1].copy()
+        self.crit_up = self.crit.copy()
         self.best_row = self.state_rows[:-1].copy()
         self.maximize = bool(maximize)
         self.adversary_minimizes = bool(adversary_minimizes)
@@ -296,6 +360,24 @@ class ReachSweeper:
                 self.adversary_minimizes,
             )
         )
+
+    def upper_pass(self, u: np.ndarray) -> tuple[float, int]:
+        """One pass of :func:`upper_sweep` on ``u`` in place (all rows):
+        ``(max decrease, violations)``."""
+        dec, bad = upper_sweep(
+            self.states,
+            self.state_rows,
+            self.row_ptr,
+            self.remaining,
+            self.succ,
+            self.lower,
+            self.gap,
+            self.crit_up,
+            u,
+            self.maximize,
+            self.adversary_minimizes,
+        )
+        return float(dec), int(bad)
 
     def row_values(self, v: np.ndarray) -> np.ndarray:
         """The robust expectation of ``v`` for every free row, in the order of the
