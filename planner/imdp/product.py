@@ -7,8 +7,19 @@ Product state ``(s, q)`` has index ``s * n_q + q``. The reward ``W(s)`` of a mod
 is carried to every ``(s, q)`` and is collected on landing.
 
 Acceptance is Rabin with pairs ``(G_i, B_i)`` of automaton states lifted to
-``S x G_i``, ``S x B_i``. Worst-case satisfaction of the formula = worst-case maximal
-probability of reaching the union of the robustly accepting end components.
+``S x G_i``, ``S x B_i``.
+
+Worst-case satisfaction (:meth:`ProductIMDP.satisfaction`) is the exact value of the game
+``P_check = max_pi min_zeta P(formula)`` with a dynamic interval adversary, also where
+lower bounds are 0 (the adversary chooses supports): :mod:`planner.imdp.rabin`. It is *not*
+in general the worst-case probability of reaching the robustly accepting end components
+(:meth:`ProductIMDP.accepting_end_components`, the paper's candidates for the MEC choice):
+that probability is a lower bound, equal to ``P_check`` when the automaton's accepting
+states are absorbing (co-safe formulas such as ``!Haz U Goal``) but smaller when the
+adversary can keep a satisfying run outside every such component (``G !c``). Best-case
+satisfaction (``pessimistic=False``): the adversary cooperates, so the product is a Markov
+decision process over the polytopes, and the value is the maximal probability of reaching
+its accepting end components (exact).
 """
 
 from __future__ import annotations
@@ -23,6 +34,7 @@ from planner.errors import ProductError
 from planner.imdp import graph
 from planner.imdp.graph import EndComponent, SubModel
 from planner.imdp.model import IMDP
+from planner.imdp.rabin import almost_sure_region, robust_satisfaction
 from planner.imdp.solve import (
     Problem,
     ReachAvoid,
@@ -133,6 +145,7 @@ class ProductIMDP:
         self._accepting: list[EndComponent] | None = None
         self._satisfaction: Solution | None = None
         self._failure: np.ndarray | None = None
+        self._winning: np.ndarray | None = None
 
     # ------------------------------------------------------------------ indexing
     @property
@@ -202,26 +215,50 @@ class ProductIMDP:
         algorithm: ValueIteration | None = None,
     ) -> Solution:
         """Max probability of satisfying the formula per product state (worst case by
-        default), with a strategy that reaches the accepting end components.
+        default: ``P_check``, see the module docstring), with a memoryless optimal strategy
+        and the certified bracket ``lower``/``upper`` (``values == lower``).
 
         The pessimistic solution without ``allowed`` is cached. The optimistic value uses
-        the optimistic accepting components.
+        the optimistic accepting components (the cooperating adversary makes it an MDP).
         """
         cache = pessimistic and allowed is None and algorithm is None
         if cache and self._satisfaction is not None:
             return self._satisfaction
         if pessimistic:
-            target = self.accepting_states()
+            sol = robust_satisfaction(
+                self.model, self._good_matrix(), self._bad_matrix(), allowed, algorithm
+            )
         else:
             target = np.zeros(self.n_states, dtype=bool)
             for g, b in zip(self.good, self.bad, strict=True):
                 for ec in graph.optimistic_accepting_end_components(self.model, g, b):
                     target[ec.states] = True
-        spec = Specification(ReachAvoid(target), "pessimistic" if pessimistic else "optimistic")
-        sol = solve(Problem(self.model, spec, allowed), algorithm)
+            spec = Specification(ReachAvoid(target), "optimistic")
+            sol = solve(Problem(self.model, spec, allowed), algorithm)
         if cache:
             self._satisfaction = sol
         return sol
+
+    def winning_states(self, allowed: np.ndarray | None = None) -> np.ndarray:
+        """States from which the formula holds with probability 1 against every adversary
+        (:func:`planner.imdp.rabin.almost_sure_region`; cached without ``allowed``)."""
+        if allowed is None and self._winning is not None:
+            return self._winning.copy()
+        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+        win, _ = almost_sure_region(self.model, self._good_matrix(), self._bad_matrix(), rows)
+        if allowed is None:
+            self._winning = win
+        return win.copy()
+
+    def _good_matrix(self) -> np.ndarray:
+        if not self.good:
+            return np.zeros((0, self.n_states), dtype=bool)
+        return np.stack(self.good)
+
+    def _bad_matrix(self) -> np.ndarray:
+        if not self.bad:
+            return np.zeros((0, self.n_states), dtype=bool)
+        return np.stack(self.bad)
 
     def nonviolating(self) -> SubModel:
         """The nonviolating sub-model: remove actions that may reach a failure state, then
@@ -245,15 +282,11 @@ class ProductIMDP:
         return SubModel(states, rows, graph.actions_from_rows(self.model, rows))
 
     def goal_strategy(self, allowed: np.ndarray | None = None) -> np.ndarray:
-        """Action per product state that maximises the worst-case satisfaction probability:
-        reach an accepting end component, then (inside) visit its ``G`` states again and
-        again with its own actions. -1 where no action is allowed or the value is 0."""
-        sol = self.satisfaction(allowed=allowed)
-        strategy = sol.strategy.copy()
-        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
-        for ec in self.accepting_end_components():
-            strategy[ec.states] = self._inside_strategy(ec, rows)
-        return strategy
+        """Action per product state that maximises the worst-case satisfaction probability
+        (the memoryless optimal strategy of :meth:`satisfaction`: inside the almost-sure
+        region it wins with probability 1, elsewhere it is optimal). -1 where no action is
+        allowed or the state is settled without one."""
+        return self.satisfaction(allowed=allowed).strategy.copy()
 
     def _inside_strategy(self, ec: EndComponent, rows: np.ndarray | None) -> np.ndarray:
         m = self.model
@@ -330,9 +363,10 @@ class ProductIMDP:
 
     def labelled_model(self) -> IMDP:
         """The product model with two extra labels for other tools: ``accept`` on the
-        states of the accepting end components (so ``Pmax=? [F "accept"]`` is the
-        satisfaction probability) and ``fail`` on the failure states."""
-        acc, fail = self.accepting_states(), self.failure_states()
+        almost-sure winning states (:meth:`winning_states`; ``Pmax=? [F "accept"]`` under
+        the worst case is the satisfaction probability whenever every satisfying run must
+        enter them, e.g. for co-safe formulas) and ``fail`` on the failure states."""
+        acc, fail = self.winning_states(), self.failure_states()
         for name in ("accept", "fail"):
             if name in self.model.propositions:
                 raise ProductError(f"the model already uses the label {name!r}")
