@@ -7,6 +7,15 @@ the value and its certified bracket ``lower upper`` (the maximal probability of
 bracket is narrower than the tolerance. ``--uncertified`` stops on the residual instead
 (faster, no error bound; ``upper`` is then the trivial 1).
 
+``hopnav imdp check FILE --ltl FORMULA [--format F] [--optimistic] [--tolerance T] [--json]``
+prints, per state, the maximal probability that a run from there satisfies the LTL
+formula (over the file's labels; worst case unless ``--optimistic``) with its certified
+bracket, through the project's automaton translation, product and exact game solution
+(:func:`planner.imdp.check.check_ltl`). JSON: ``{"initial": [...], "values": [...],
+"lower": [...], "upper": [...], "automaton_states": n}`` (``initial``: the values at the
+file's initial states). A formula that does not parse, or names a proposition that is not
+a label of the file, is an error (exit 2).
+
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
 
@@ -51,6 +60,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print a JSON object")
     s.set_defaults(func=run_solve)
 
+    c = sub.add_parser("check", help="robust satisfaction of an LTL formula on a model file")
+    c.add_argument("file")
+    c.add_argument("--ltl", required=True, help="LTL formula over the file's labels")
+    c.add_argument("--format", choices=FORMATS, help="default: from the file suffix")
+    c.add_argument("--optimistic", action="store_true", help="best case instead of worst")
+    c.add_argument("--tolerance", type=float, default=1e-8)
+    c.add_argument("--json", action="store_true", help="print a JSON object")
+    c.set_defaults(func=run_check)
+
     e = sub.add_parser("export", help="write a model file, or a scenario's product, in a format")
     src = e.add_mutually_exclusive_group(required=True)
     src.add_argument("file", nargs="?", help="model file to convert")
@@ -91,13 +109,52 @@ def run_solve(args: argparse.Namespace) -> int:
         }
         print(json.dumps(out))
     else:
-        print("# state value lower upper", file=sys.stderr)
-        for s, (v, lo, hi) in enumerate(zip(sol.values, sol.lower, sol.upper, strict=True)):
-            print(f"{s} {v:.12g} {lo:.12g} {hi:.12g}")
+        _print_bracket(sol.values, sol.lower, sol.upper)
         state = "certified" if sol.converged and not args.uncertified else "NOT certified"
         print(
             f"# bracket width {sol.error:.3g} ({state}), residual {sol.residual:.3g}, "
             f"iterations {sol.iterations}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _print_bracket(values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
+    """One line per state: ``state value lower upper``."""
+    print("# state value lower upper", file=sys.stderr)
+    for s, (v, lo, hi) in enumerate(zip(values, lower, upper, strict=True)):
+        print(f"{s} {v:.12g} {lo:.12g} {hi:.12g}")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    from planner.imdp.check import check_ltl
+
+    try:
+        if not args.tolerance > 0:
+            raise PlannerError(f"--tolerance must be positive, got {args.tolerance}")
+        model = read_model(args.file, args.format)
+        result = check_ltl(
+            model, args.ltl, args.optimistic, ValueIteration(tolerance=args.tolerance)
+        )
+    except PlannerError as err:
+        print(f"hopnav imdp check: {err}", file=sys.stderr)
+        return 2
+    if args.json:
+        out = {
+            "initial": result.values[result.initial].tolist(),
+            "values": result.values.tolist(),
+            "lower": result.lower.tolist(),
+            "upper": result.upper.tolist(),
+            "automaton_states": result.automaton_states,
+        }
+        print(json.dumps(out))
+    else:
+        _print_bracket(result.values, result.lower, result.upper)
+        state = "certified" if result.converged else "NOT certified"
+        init = ", ".join(f"{result.values[i]:.12g}" for i in result.initial)
+        print(
+            f"# initial {init}; automaton states {result.automaton_states}; "
+            f"bracket width {result.solution.error:.3g} ({state})",
             file=sys.stderr,
         )
     return 0
