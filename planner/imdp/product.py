@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from planner.automaton import RabinAutomaton
@@ -102,31 +103,26 @@ class ProductIMDP:
         )
         """Automaton letter of each model state's label set."""
         delta = automaton.transitions
-        s, a, t, lo, up = model.coo()
-        # every model state's block of entries once per automaton state, in the order
-        # (s, q, a, t): product state s * nq + q, so the entries come out sorted
-        start = model.row_ptr[model.state_ptr[:-1]]
-        length = model.row_ptr[model.state_ptr[1:]] - start
-        seg_start = np.repeat(start, nq)
-        seg_len = np.repeat(length, nq)
-        offsets = np.concatenate(([0], np.cumsum(seg_len)[:-1]))
-        idx = np.arange(int(seg_len.sum()), dtype=np.int64) + np.repeat(
-            seg_start - offsets, seg_len
+        layout = _product_layout(
+            model.state_ptr,
+            model.row_ptr,
+            model.row_action,
+            model.successor,
+            model.lower,
+            model.upper,
+            delta,
+            self.letters,
+            nq,
         )
-        q = np.repeat(np.tile(np.arange(nq, dtype=np.int64), model.n_states), seg_len)
-        s, a, t, lo, up = s[idx], a[idx], t[idx], lo[idx], up[idx]
-        ps = s * nq + q
-        pt = t * nq + delta[q, self.letters[t]]
         init = model.initial * nq + delta[automaton.initial, self.letters[model.initial]]
-        self.model: IMDP = IMDP(
+        # every model state's rows once per automaton state, in the order (s, q, a, t):
+        # product state s * nq + q and successors t * nq + q' come out sorted, and the
+        # bounds are the model's (already checked)
+        self.model: IMDP = IMDP._trusted(
             model.n_states * nq,
-            ps,
-            a,
-            pt,
-            lo,
-            up,
+            *layout,
             n_actions=model.n_actions,
-            labels=[model.labels[i // nq] for i in range(model.n_states * nq)],
+            label_matrix=np.repeat(model.label_matrix, nq, axis=0),
             propositions=model.propositions,
             initial=init,
             action_names=model.action_names,
@@ -201,10 +197,7 @@ class ProductIMDP:
         no ``upper > 0`` path to an end component that a cooperative adversary keeps
         visiting some ``G_i`` and no ``B_i`` (computed once, then a copy is returned)."""
         if self._failure is None:
-            target = np.zeros(self.n_states, dtype=bool)
-            for g, b in zip(self.good, self.bad, strict=True):
-                for ec in graph.optimistic_accepting_end_components(self.model, g, b):
-                    target[ec.states] = True
+            target = self._optimistic_accepting()
             self._failure = ~graph.possible_reach(self.model, target)
         return self._failure.copy()
 
@@ -229,10 +222,8 @@ class ProductIMDP:
                 self.model, self._good_matrix(), self._bad_matrix(), allowed, algorithm
             )
         else:
-            target = np.zeros(self.n_states, dtype=bool)
-            for g, b in zip(self.good, self.bad, strict=True):
-                for ec in graph.optimistic_accepting_end_components(self.model, g, b):
-                    target[ec.states] = True
+            rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+            target = self._optimistic_accepting(rows)
             spec = Specification(ReachAvoid(target), "optimistic")
             sol = solve(Problem(self.model, spec, allowed), algorithm)
         if cache:
@@ -249,6 +240,13 @@ class ProductIMDP:
         if allowed is None:
             self._winning = win
         return win.copy()
+
+    def _optimistic_accepting(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """States of the end components that a cooperating adversary keeps on some pair."""
+        target = np.zeros(self.n_states, dtype=bool)
+        for g, b in zip(self.good, self.bad, strict=True):
+            target |= graph.optimistic_accepting_states(self.model, g, b, rows)
+        return target
 
     def _good_matrix(self) -> np.ndarray:
         if not self.good:
@@ -393,3 +391,39 @@ class ProductIMDP:
     def component_actions(self, component: EndComponent) -> np.ndarray:
         """``(n_states, n_actions)`` mask of the component's actions."""
         return graph.actions_from_rows(self.model, component.row_mask(self.model.n_rows))
+
+
+@numba.njit(cache=True, nogil=True)
+def _product_layout(state_ptr, row_ptr, row_action, successor, lower, upper, delta, letters, nq):
+    """Rows and entries of the product, in the model's internal layout: per model state
+    ``s`` and automaton state ``q``, the rows of ``s`` with successors
+    ``t * nq + delta[q, letters[t]]``. Returns ``(row_state, row_action, row_ptr,
+    successor, lower, upper)``."""
+    n = state_ptr.size - 1
+    n_rows = (state_ptr[n] - state_ptr[0]) * nq
+    n_entries = 0
+    for s in range(n):
+        n_entries += (row_ptr[state_ptr[s + 1]] - row_ptr[state_ptr[s]]) * nq
+    p_state = np.empty(n_rows, dtype=np.int64)
+    p_action = np.empty(n_rows, dtype=np.int64)
+    p_ptr = np.empty(n_rows + 1, dtype=np.int64)
+    p_succ = np.empty(n_entries, dtype=np.int64)
+    p_lo = np.empty(n_entries)
+    p_up = np.empty(n_entries)
+    r_out = 0
+    e_out = 0
+    for s in range(n):
+        for q in range(nq):
+            for r in range(state_ptr[s], state_ptr[s + 1]):
+                p_state[r_out] = s * nq + q
+                p_action[r_out] = row_action[r]
+                p_ptr[r_out] = e_out
+                for e in range(row_ptr[r], row_ptr[r + 1]):
+                    t = successor[e]
+                    p_succ[e_out] = t * nq + delta[q, letters[t]]
+                    p_lo[e_out] = lower[e]
+                    p_up[e_out] = upper[e]
+                    e_out += 1
+                r_out += 1
+    p_ptr[n_rows] = e_out
+    return p_state, p_action, p_ptr, p_succ, p_lo, p_up

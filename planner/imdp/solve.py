@@ -491,6 +491,7 @@ def _reach_sweeps(
     upper: np.ndarray | None = None
     upper_sweeps = 0
     tries = 0
+    exacted = False
     while it < alg.max_iterations:
         it += 1
         check = it > next_eval
@@ -508,10 +509,17 @@ def _reach_sweeps(
                 break
             u, passes = certify.optimistic_candidate(sweeper, v, alg.tolerance / 2)
             upper_sweeps += passes
-            if u is None and use_si and sigma is None and n_free <= _SI_MAX_STATES:
+            if u is None and use_si and not exacted and n_free <= _SI_MAX_STATES:
                 # make the values from below exact (the least fixed point), then check
+                exacted = True
                 x, sigma, rounds = _strategy_iteration(
-                    m, free_rows, v, fixed_val, adversary_minimizes, alg.tolerance
+                    m,
+                    free_rows,
+                    v,
+                    fixed_val,
+                    adversary_minimizes,
+                    alg.tolerance,
+                    max_rounds=_CERTIFY_ROUNDS,
                 )
                 evaluations += rounds
                 if x is not None:
@@ -552,7 +560,7 @@ def _reach_sweeps(
         upper[sweeper.states] = 1.0
     if alg.certified and np.max(upper - v) >= alg.tolerance:
         # from a superharmonic U (at worst the trivial U = 1) every pass stays one
-        for _ in range(max(it, _FALLBACK_PASSES)):
+        for _ in range(_FALLBACK_PASSES):
             upper_sweeps += 1
             sweeper.upper_pass(upper)
             if np.max(upper - v) < alg.tolerance:
@@ -563,8 +571,12 @@ def _reach_sweeps(
 _OVI_TRIES = 6
 """Failed candidates before the upper bound is iterated from 1 instead."""
 
-_FALLBACK_PASSES = 1000
-"""Passes from ``U = 1`` at least (else as many as the sweeps from below took)."""
+_FALLBACK_PASSES = 200
+"""Passes of the upper bound from the last certified vector (or ``U = 1``) when no
+candidate closed the bracket (each pass keeps it certified)."""
+
+_CERTIFY_ROUNDS = 12
+"""Strategy-improvement rounds spent on making the values exact for the certificate."""
 
 _MIN_GOAL = 1e-15
 """The smallest residual goal the sweeps from below are driven to."""
@@ -618,6 +630,7 @@ def _strategy_iteration(
     fixed_val: np.ndarray,
     adversary_minimizes: bool,
     tol: float,
+    max_rounds: int | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Robust strategy iteration for maximal reachability, started from the strategy
     greedy for ``v``.
@@ -646,7 +659,8 @@ def _strategy_iteration(
     sigma = choice[rs[seg]]
     slack = tol * 1e-2
     best: np.ndarray | None = None
-    for rounds in range(1, _MAX_IMPROVEMENTS + 1):
+    limit = _MAX_IMPROVEMENTS if max_rounds is None else max_rounds
+    for rounds in range(1, limit + 1):
         start = v if best is None else best
         x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start)
         if x is None:
@@ -663,7 +677,7 @@ def _strategy_iteration(
         top = np.flatnonzero(q >= q_best[seg_id])
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
-    return best, None, _MAX_IMPROVEMENTS
+    return best, None, limit
 
 
 def _strategy(
