@@ -25,6 +25,7 @@ from planner.errors import SpecificationError
 from planner.imdp.kernels import (
     backward_distance,
     maximal_end_components_kernel,
+    prune_kernel,
     robust_attractor,
     rows_staying_in,
 )
@@ -434,12 +435,17 @@ class SubModel:
 def prune(model: IMDP, removed: np.ndarray, rows: np.ndarray | None = None) -> SubModel:
     """Remove the rows that may enter ``removed``, then the states left without rows, and
     repeat until nothing changes (Jiang et al. 2023, Algorithm 1)."""
-    r = _all_rows(model, rows).copy()
-    bad = np.asarray(removed, dtype=bool).copy()
-    while True:
-        r &= ~bad[model.row_state] & ~may_enter(model, bad)
-        new_bad = bad | ~has_row(model, r)
-        if np.array_equal(new_bad, bad):
-            break
-        bad = new_bad
+    r = _all_rows(model, rows)
+    ptr, inc_row, _, inc_upper = model.incoming()
+    bad, r = prune_kernel(
+        np.asarray(removed, dtype=bool),
+        r,
+        model.row_state,
+        model.row_ptr,
+        model.successor,
+        model.upper,
+        ptr,
+        inc_row,
+        inc_upper,
+    )
     return SubModel(~bad, r, actions_from_rows(model, r))

@@ -832,3 +832,51 @@ def maximal_end_components_kernel(
         if rows[r] and (not alive[row_state[r]]):
             rows[r] = False
     return comp, rows
+
+
+@numba.njit(cache=True, nogil=True)
+def prune_kernel(
+    removed, rows_ok, row_state, row_ptr, successor, upper, inc_ptr, inc_row, inc_upper
+):
+    """Remove the rows that may (``upper > 0``) enter a removed state and the states left
+    without rows, in a cascade through the incoming entries (Jiang et al. 2023, Alg. 1):
+    ``(removed states, rows kept)``."""
+    n = removed.size
+    n_rows = row_ptr.size - 1
+    bad = removed.copy()
+    rows = rows_ok.copy()
+    live = np.zeros(n, dtype=np.int64)
+    for r in range(n_rows):
+        if not rows[r]:
+            continue
+        if bad[row_state[r]]:
+            rows[r] = False
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper[e] > 0.0 and bad[successor[e]]:
+                rows[r] = False
+                break
+        if rows[r]:
+            live[row_state[r]] += 1
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for s in range(n):
+        if not bad[s] and live[s] == 0:
+            bad[s] = True
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if rows[r] and inc_upper[k] > 0.0:
+                rows[r] = False
+                s = row_state[r]
+                live[s] -= 1
+                if live[s] == 0 and not bad[s]:
+                    bad[s] = True
+                    queue[tail] = s
+                    tail += 1
+    return bad, rows

@@ -144,10 +144,9 @@ class _Game:
         self.m = model
         self.good = np.asarray(good, dtype=bool).reshape(-1, model.n_states)
         self.bad = np.asarray(bad, dtype=bool).reshape(-1, model.n_states)
-        order, ptr = counting_order(model.successor, model.n_states)
-        self.order = order
-        self.inc_ptr = ptr
-        self.inc_row = model.entry_row[order]
+        # the model's reverse index (and, on demand, the entries' order in it)
+        self.inc_ptr, self.inc_row, _, _ = model.incoming()
+        self._order: np.ndarray | None = None
         self.limit = 1.0 - model.tolerance
 
     # -- colours
@@ -170,16 +169,25 @@ class _Game:
                 return z
             z = z & ~self.good[sat].any(axis=0)
 
-    # -- attractors
-    def _eff(self, entry_ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # -- attractors (``entry_ok=None``: every entry allowed)
+    def _eff(self, entry_ok: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Lower and upper bounds with the disallowed entries zeroed, in entry order and in
+        the reverse index's order."""
         m = self.m
-        return np.where(entry_ok, m.lower, 0.0), np.where(entry_ok, m.upper, 0.0)
+        if entry_ok is None:
+            _, _, inc_lo, inc_up = m.incoming()
+            return m.lower, m.upper, inc_lo, inc_up
+        if self._order is None:
+            self._order, _ = counting_order(m.successor, m.n_states)
+        lo = np.where(entry_ok, m.lower, 0.0)
+        up = np.where(entry_ok, m.upper, 0.0)
+        return lo, up, lo[self._order], up[self._order]
 
     def controller_attractor(
         self, region, rows_ok, entry_ok, start
     ) -> tuple[np.ndarray, np.ndarray]:
         m = self.m
-        lo, up = self._eff(entry_ok)
+        lo, up, inc_lo, inc_up = self._eff(entry_ok)
         cand = rows_ok & region[m.row_state] & ~start[m.row_state]
         x, choice = robust_attractor(
             start & region,
@@ -191,15 +199,15 @@ class _Game:
             up,
             self.inc_ptr,
             self.inc_row,
-            lo[self.order],
-            up[self.order],
+            inc_lo,
+            inc_up,
             self.limit,
         )
         return x & region, choice
 
     def adversary_attractor(self, region, rows_ok, entry_ok, won, start) -> np.ndarray:
         m = self.m
-        up = np.where(entry_ok, m.upper, 0.0)
+        _, up, _, inc_up = self._eff(entry_ok)
         return _adversary_attractor(
             region,
             start,
@@ -209,13 +217,13 @@ class _Game:
             up,
             self.inc_ptr,
             self.inc_row,
-            up[self.order],
+            inc_up,
             m.n_rows,
         )
 
     def closed_rows(self, region, rows_ok, entry_ok) -> np.ndarray:
         m = self.m
-        up = np.where(entry_ok, m.upper, 0.0)
+        _, up, _, _ = self._eff(entry_ok)
         return _rows_inside(region, rows_ok, m.row_state, m.row_ptr, m.successor, up)
 
     # -- Zielonka
@@ -240,7 +248,8 @@ class _Game:
                 if h.any():
                     # the adversary can keep the run in h: restrict the entries to it
                     rows_h = rows_ok & h[m.row_state]
-                    entry_h = entry_ok & h[m.successor] & rows_h[m.entry_row]
+                    inside = h[m.successor] & rows_h[m.entry_row]
+                    entry_h = inside if entry_ok is None else entry_ok & inside
                     w_h = self.solve(h, rows_h, entry_h, won & h, strategy)
                 else:
                     w_h = h
@@ -302,18 +311,12 @@ def almost_sure_region(
     outside = ~region
     if outside.any():
         lose = game.adversary_attractor(
-            np.ones(m.n_states, bool),
-            rows_ok,
-            np.ones(m.n_entries, bool),
-            np.zeros(m.n_states, bool),
-            outside,
+            np.ones(m.n_states, bool), rows_ok, None, np.zeros(m.n_states, bool), outside
         )
         region &= ~lose
-    rows_ok = game.closed_rows(region, rows_ok, np.ones(m.n_entries, bool))
+    rows_ok = game.closed_rows(region, rows_ok, None)
     strategy = np.full(m.n_states, -1, dtype=np.int64)
-    win = game.solve(
-        region, rows_ok, np.ones(m.n_entries, bool), np.zeros(m.n_states, bool), strategy
-    )
+    win = game.solve(region, rows_ok, None, np.zeros(m.n_states, bool), strategy)
     strategy[~win] = -1
     return win, strategy
 
