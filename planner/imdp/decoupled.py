@@ -38,6 +38,7 @@ from below, certified from above like :func:`planner.imdp.solve.solve` (a candid
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -132,49 +133,35 @@ def _row_value(
     w,
     idx,
     keys,
+    pin,
 ):
     """The adversary's expectation of ``v`` for row ``r`` (see the module docstring):
-    vertices of the outer axis, the state-ordering adversary on the inner one."""
-    a = optr[r]
-    n_out = optr[r + 1] - a
-    ia = iptr[r]
-    n_in = iptr[r + 1] - ia
-    base = row_map[r]
+    vertices of the outer axis (:func:`_row_value_at` each), the best of them."""
+    n_out = optr[r + 1] - optr[r]
     sign = 1.0 if minimize else -1.0
     best = np.inf
     for vs in range(vptr[r], vptr[r + 1], n_out):
-        # induced values on the inner bins
-        for j in range(n_in):
-            acc = 0.0
-            for i in range(n_out):
-                p = vval[vs + i]
-                if p == 0.0:
-                    continue
-                if outer_x:
-                    succ = maps[base, obin[a + i], ibin[ia + j]]
-                else:
-                    succ = maps[base, ibin[ia + j], obin[a + i]]
-                acc += p * v[succ]
-            w[j] = sign * acc
-        # ordering adversary on the inner axis (insertion sort of the keys)
-        for j in range(n_in):
-            k = w[j]
-            h = j - 1
-            while h >= 0 and keys[h] > k:
-                keys[h + 1] = keys[h]
-                idx[h + 1] = idx[h]
-                h -= 1
-            keys[h + 1] = k
-            idx[h + 1] = j
-        left = irem[r]
-        q = 0.0
-        for j in range(n_in):
-            e = idx[j]
-            add = igap[ia + e] if igap[ia + e] < left else left
-            if add < 0.0:
-                add = 0.0
-            left -= add
-            q += (ilo[ia + e] + add) * keys[j]
+        q = _row_value_at(
+            vs,
+            r,
+            v,
+            sign,
+            outer_x,
+            optr,
+            obin,
+            vval,
+            iptr,
+            ibin,
+            ilo,
+            igap,
+            irem,
+            maps,
+            row_map,
+            w,
+            idx,
+            keys,
+            pin,
+        )
         if q < best:
             best = q
     return sign * best
@@ -210,6 +197,7 @@ def _sweep(
     w = np.empty(width)
     idx = np.empty(width, dtype=np.int64)
     keys = np.empty(width)
+    pin = np.empty(width)
     change = 0.0
     bad = 0
     for k in range(states.size):
@@ -220,7 +208,7 @@ def _sweep(
                 r,
                 v,
                 minimize_adv,
-                outer_x[r],
+                outer_x,
                 optr,
                 obin,
                 vptr,
@@ -235,6 +223,7 @@ def _sweep(
                 w,
                 idx,
                 keys,
+                pin,
             )
             if (q > best) if maximize_rows else (q < best):
                 best = q
@@ -275,13 +264,14 @@ def _all_values(
     w = np.empty(width)
     idx = np.empty(width, dtype=np.int64)
     keys = np.empty(width)
+    pin = np.empty(width)
     out = np.empty(row_map.size)
     for r in range(row_map.size):
         out[r] = _row_value(
             r,
             v,
             minimize,
-            outer_x[r],
+            outer_x,
             optr,
             obin,
             vptr,
@@ -296,8 +286,175 @@ def _all_values(
             w,
             idx,
             keys,
+            pin,
         )
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _chosen_distributions(
+    rows,
+    v,
+    minimize,
+    outer_x,
+    optr,
+    obin,
+    vptr,
+    vval,
+    iptr,
+    ibin,
+    ilo,
+    igap,
+    irem,
+    maps,
+    row_map,
+    width,
+):
+    """The adversary's optimal product distribution for each of ``rows`` at values ``v``
+    (the vertex and inner order that :func:`_row_value` picks), as COO
+    ``(row position, successor, probability)`` with repeated successors."""
+    w = np.empty(width)
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    total = 0
+    for k in range(rows.size):
+        r = rows[k]
+        total += (optr[r + 1] - optr[r]) * (iptr[r + 1] - iptr[r])
+    out_r = np.empty(total, dtype=np.int64)
+    out_s = np.empty(total, dtype=np.int64)
+    out_p = np.empty(total)
+    pos = 0
+    pin = np.empty(width)
+    for k in range(rows.size):
+        r = rows[k]
+        a = optr[r]
+        n_out = optr[r + 1] - a
+        ia = iptr[r]
+        n_in = iptr[r + 1] - ia
+        base = row_map[r]
+        sign = 1.0 if minimize else -1.0
+        best = np.inf
+        best_vs = vptr[r]
+        for vs in range(vptr[r], vptr[r + 1], n_out):
+            q = _row_value_at(
+                vs,
+                r,
+                v,
+                sign,
+                outer_x,
+                optr,
+                obin,
+                vval,
+                iptr,
+                ibin,
+                ilo,
+                igap,
+                irem,
+                maps,
+                row_map,
+                w,
+                idx,
+                keys,
+                pin,
+            )
+            if q < best:
+                best = q
+                best_vs = vs
+        _row_value_at(
+            best_vs,
+            r,
+            v,
+            sign,
+            outer_x,
+            optr,
+            obin,
+            vval,
+            iptr,
+            ibin,
+            ilo,
+            igap,
+            irem,
+            maps,
+            row_map,
+            w,
+            idx,
+            keys,
+            pin,
+        )
+        for i in range(n_out):
+            for j in range(n_in):
+                if outer_x[r]:
+                    succ = maps[base, obin[a + i], ibin[ia + j]]
+                else:
+                    succ = maps[base, ibin[ia + j], obin[a + i]]
+                out_r[pos] = k
+                out_s[pos] = succ
+                out_p[pos] = vval[best_vs + i] * pin[j]
+                pos += 1
+    return out_r, out_s, out_p
+
+
+@numba.njit(cache=True, nogil=True)
+def _row_value_at(
+    vs,
+    r,
+    v,
+    sign,
+    outer_x,
+    optr,
+    obin,
+    vval,
+    iptr,
+    ibin,
+    ilo,
+    igap,
+    irem,
+    maps,
+    row_map,
+    w,
+    idx,
+    keys,
+    pin,
+):
+    """:func:`_row_value` for one outer vertex (at ``vval[vs:]``), the inner distribution
+    written to ``pin`` (signed expectation returned)."""
+    a = optr[r]
+    n_out = optr[r + 1] - a
+    ia = iptr[r]
+    n_in = iptr[r + 1] - ia
+    base = row_map[r]
+    for j in range(n_in):
+        acc = 0.0
+        for i in range(n_out):
+            p = vval[vs + i]
+            if p == 0.0:
+                continue
+            if outer_x[r]:
+                succ = maps[base, obin[a + i], ibin[ia + j]]
+            else:
+                succ = maps[base, ibin[ia + j], obin[a + i]]
+            acc += p * v[succ]
+        w[j] = sign * acc
+    for j in range(n_in):
+        k = w[j]
+        h = j - 1
+        while h >= 0 and keys[h] > k:
+            keys[h + 1] = keys[h]
+            idx[h + 1] = idx[h]
+            h -= 1
+        keys[h + 1] = k
+        idx[h + 1] = j
+    left = irem[r]
+    q = 0.0
+    for j in range(n_in):
+        e = idx[j]
+        add = igap[ia + e] if igap[ia + e] < left else left
+        if add < 0.0:
+            add = 0.0
+        left -= add
+        pin[e] = ilo[ia + e] + add
+        q += pin[e] * keys[j]
+    return q
 
 
 # --------------------------------------------------------------------------- model
@@ -603,6 +760,48 @@ def solve_reach(
     )
 
 
+def _certify(
+    m: DecoupledIMDP,
+    states: np.ndarray,
+    lower: np.ndarray,
+    sol: Solution,
+    pessimistic: bool,
+    alg: ValueIteration,
+) -> Solution | None:
+    """The bracket ``[lower, min(1, lower + tolerance / 2)]`` if the upper end passes the
+    superharmonic check (:func:`_sweep` from above), else ``None``."""
+    order = states[np.lexsort((states,))]
+    row_lo, row_hi = m.state_ptr[order], m.state_ptr[order + 1]
+    u = lower.copy()
+    u[order] = np.minimum(1.0, lower[order] + alg.tolerance / 2)
+    for _ in range(8):
+        _, bad = _sweep(order, row_lo, row_hi, u, False, True, pessimistic, *m._layout(), m.width)
+        if bad == 0:
+            return Solution(
+                values=lower,
+                strategy=sol.strategy,
+                residual=sol.residual,
+                iterations=sol.iterations,
+                converged=bool(np.max(u - lower) < alg.tolerance),
+                evaluations=1,
+                fixed=sol.fixed,
+                lower=lower,
+                upper=u,
+                upper_sweeps=sol.upper_sweeps,
+            )
+    return None
+
+
+def expanded_size(model: DecoupledIMDP) -> int:
+    """Entries :func:`expanded_imdp` would have (vertex pairs times the pair supports)."""
+    m = model
+    (xp, _, xl, xu), (yp, _, yl, yu) = m.axes
+    rows = np.arange(m.n_rows, dtype=np.int64)
+    nx = np.diff(_vertices(xp, xl, xu, rows, m.tolerance)[0]) // np.diff(xp)
+    ny = np.diff(_vertices(yp, yl, yu, rows, m.tolerance)[0]) // np.diff(yp)
+    return int(np.sum(nx * ny * (1 + np.diff(xp) * np.diff(yp))))
+
+
 def expanded_imdp(model: DecoupledIMDP) -> tuple[IMDP, int]:
     """An interval MDP with the same reachability values: every row leads, with intervals
     ``[0, 1]``, to one auxiliary state per pair of per-axis vertices, which moves with that
@@ -662,6 +861,60 @@ def expanded_imdp(model: DecoupledIMDP) -> tuple[IMDP, int]:
         tolerance=max(m.tolerance, 1e-12),
     )
     return out, n
+
+
+def strategy_iteration(
+    model: DecoupledIMDP,
+    states: np.ndarray,
+    fixed_val: np.ndarray,
+    start: np.ndarray,
+    pessimistic: bool,
+    rounds: int = 50,
+) -> np.ndarray | None:
+    """Exact values of the reachability game on ``states`` (the others held at
+    ``fixed_val``) by strategy iteration (Hoffman-Karp): evaluate the strategy against the
+    adversary's best response (adversary policy iteration on the exact operator's choices,
+    each a sparse solve), switch rows that are strictly better, repeat. ``None`` when it
+    does not settle within ``rounds``. The values are those of the last strategy (a lower
+    bound of the value) and, when it settles, the value itself."""
+    import scipy.sparse as sp
+
+    from planner.imdp.evaluate import chain_reach
+
+    m = model
+    layout = m._layout()
+    x = np.asarray(start, dtype=np.float64).copy()
+    free = np.zeros(m.n_states, bool)
+    free[states] = True
+
+    def greedy(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = m.expectation(values, minimize=pessimistic)
+        best = np.maximum.reduceat(q, m.state_ptr[:-1])
+        top = np.flatnonzero(q >= best[m.row_state])
+        return top[first_of_runs(m.row_state[top])], q
+
+    choice, _ = greedy(x)
+    choice = choice[free[m.row_state[choice]]]
+    slack = 1e-13
+    for _ in range(rounds):
+        rows = choice
+        for _ in range(rounds):
+            r, t, p = _chosen_distributions(rows, x, pessimistic, *layout, m.width)
+            mat = sp.csr_matrix((p, (r, t)), shape=(rows.size, m.n_states))
+            y = chain_reach(mat, m.row_state[rows], np.where(free, 0.0, fixed_val))
+            done = np.max(np.abs(y - x)) <= 1e-15
+            x = y
+            if done:
+                break
+        else:
+            return None
+        best, q = greedy(x)
+        best = best[free[m.row_state[best]]]
+        better = q[best] > q[rows] + slack
+        if not better.any():
+            return x
+        choice = np.where(better, best, rows)
+    return None
 
 
 # --------------------------------------------------------------------------- product
@@ -768,17 +1021,31 @@ class DecoupledProduct:
         with the exact operator; where their bracket does not close (a region the
         controller can circulate in, with equal values), on :func:`expanded_imdp` by
         :func:`planner.imdp.solve.solve` (its strategy iteration makes the values exact)
-        when the model has at most ``_EXPAND_MAX_ROWS`` rows."""
+        when the model has at most ``_EXPAND_MAX_ROWS`` rows (the direct sweeps are then
+        capped at ``_DIRECT_SWEEPS``: they can creep where mass leaks slowly)."""
         target = self.accepting_sink()
-        sol = solve_reach(self.model, target, None, pessimistic, algorithm)
-        if sol.converged or self.model.n_rows > _EXPAND_MAX_ROWS:
+        alg = ValueIteration() if algorithm is None else algorithm
+        small = self.model.n_rows <= _EXPAND_MAX_ROWS
+        direct = (
+            replace(alg, max_iterations=min(alg.max_iterations, _DIRECT_SWEEPS)) if small else alg
+        )
+        sol = solve_reach(self.model, target, None, pessimistic, direct)
+        if sol.converged or not small:
+            return sol
+        free = np.flatnonzero(~sol.fixed)
+        x = strategy_iteration(self.model, free, sol.lower, sol.lower, pessimistic)
+        if x is not None:
+            certified = _certify(self.model, free, np.maximum(sol.lower, x), sol, pessimistic, alg)
+            if certified is not None:
+                return certified
+        if expanded_size(self.model) > _EXPAND_MAX_ENTRIES:
             return sol
         big, n = expanded_imdp(self.model)
         spec = Specification(
             ReachAvoid(np.concatenate([target, np.zeros(big.n_states - n, bool)])),
             "pessimistic" if pessimistic else "optimistic",
         )
-        full = solve(Problem(big, spec), algorithm)
+        full = solve(Problem(big, spec), alg)
         return Solution(
             values=np.maximum(sol.lower, full.lower[:n]),
             strategy=np.where(full.strategy[:n] >= 0, full.strategy[:n], sol.strategy),
@@ -795,6 +1062,13 @@ class DecoupledProduct:
 
 _EXPAND_MAX_ROWS = 20_000
 """Rows up to which an uncertified decoupled solve falls back to the expanded model."""
+
+_EXPAND_MAX_ENTRIES = 2_000_000
+"""Entries of the expanded model (vertex pairs times their supports) up to which it is
+built; beyond, the direct solve's (sound, possibly wide) bracket is returned."""
+
+_DIRECT_SWEEPS = 2_000
+"""Sweeps of the direct solve before the fallback (it can creep where mass leaks slowly)."""
 
 
 # --------------------------------------------------------------------------- grid
