@@ -199,7 +199,9 @@ def bench_grid(rng: np.random.Generator, full: bool, storm: bool) -> None:
     )
     if storm:
         cert, t_cert = timed(lambda: solve(Problem(pm, spec)))
-        side_by_side("grid product", prod.labelled_model(), '"accept"', fast, t_fast, cert, t_cert)
+        side_by_side(
+            "grid product", prod.labelled_model(), 'F "accept"', fast, t_fast, cert, t_cert
+        )
 
 
 def bench_random(rng: np.random.Generator, n: int, storm: bool) -> None:

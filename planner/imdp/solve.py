@@ -568,10 +568,10 @@ def _reach_sweeps(
     return v, upper, residual, it, sigma, evaluations, sweeper.row_values(v), upper_sweeps
 
 
-_OVI_TRIES = 6
+_OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
 
-_FALLBACK_PASSES = 200
+_FALLBACK_PASSES = 50
 """Passes of the upper bound from the last certified vector (or ``U = 1``) when no
 candidate closed the bracket (each pass keeps it certified)."""
 
