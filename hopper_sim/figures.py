@@ -626,13 +626,14 @@ def render_run_figure(
 
 
 class FigureWriter(Observer):
-    """Observer collecting each run's hops and writing its figure at ``on_run_end``.
+    """Observer collecting each run's hops and writing its figure.
 
     Args:
         path: where to write: a callable ``run_number -> path`` (1-based), or a path that may
-            hold ``{run}`` (formatted with the 1-based run number). A fixed path is
-            overwritten by every run, so it keeps the last run's figure (the paper shows the
-            tenth run of (c)/(d)). The extension chooses the format.
+            hold ``{run}`` (formatted with the 1-based run number): each run's figure is
+            written at its ``on_run_end``. A fixed path (no ``{run}``) keeps only the last
+            finished run (the paper shows the tenth run of (c)/(d)), written once, on
+            :meth:`close`. The extension chooses the format.
         n_runs: runs in the invocation, for the titles.
         size_inches, dpi: as in :func:`render_figure`.
 
@@ -654,11 +655,13 @@ class FigureWriter(Observer):
         if not callable(path):
             figure_format(path)
         self._path = path
+        self._per_run = callable(path) or "{run}" in str(path)
         self.n_runs = n_runs
         self.size_inches = size_inches
         self.dpi = dpi
         self._scenario: dict[int, Scenario] = {}
         self._hops: dict[int, list[HopEvent]] = {}
+        self._last: tuple[Scenario, list[HopEvent], RunEnd] | None = None
         self.written: list[Path] = []
 
     def path_for(self, run_index: int) -> Path:
@@ -678,11 +681,25 @@ class FigureWriter(Observer):
         k = event.run_index
         if k not in self._scenario:
             raise FigureError(f"run {k + 1} ended without a RunStart: no scenario to draw")
+        self._last = (self._scenario.pop(k), self._hops.pop(k, []), event)
+        if self._per_run:
+            self._write()
+
+    def close(self) -> None:
+        """Write the last finished run's figure (for a fixed path)."""
+        if not self._per_run:
+            self._write()
+
+    def _write(self) -> None:
+        if self._last is None:
+            return
+        scenario, hops, end = self._last
+        self._last = None
         out = render_run_figure(
-            self._scenario.pop(k),
-            self._hops.pop(k, []),
-            self.path_for(k),
-            end=event,
+            scenario,
+            hops,
+            self.path_for(end.run_index),
+            end=end,
             n_runs=self.n_runs,
             size_inches=self.size_inches,
             dpi=self.dpi,

@@ -204,6 +204,8 @@ class RecordedRun:
             p_switch=s.get("p_switch"),
             backups=int(s.get("backups") or 0),
             seconds=float(s.get("seconds") or 0.0),
+            reason=str(s.get("reason") or ""),
+            left_plan_step=s.get("left_plan_step"),
         )
 
 

@@ -199,3 +199,24 @@ def test_run_titles_number_runs_from_one():
         == f"scenario c, run 1 of 10: success, 5 hops, reward {end.reward:g}"
     )
     assert run_title(scenario, hops=0) == "scenario c: 0 hops"
+
+
+def test_figure_writer_with_a_fixed_path_writes_the_last_run_once(tmp_path: Path, monkeypatch):
+    import hopper_sim.figures as figures
+
+    drawn = []
+    real = figures.render_run_figure
+    monkeypatch.setattr(
+        figures,
+        "render_run_figure",
+        lambda *a, **k: drawn.append(k["end"].run_index) or real(*a, **k),
+    )
+    scenario = load_scenario("c")
+    writer = FigureWriter(tmp_path / "c.png", n_runs=3)
+    for k in range(3):
+        feed(writer, run_events(scenario, k, 2 + k))
+    assert writer.written == [] and list(tmp_path.iterdir()) == []
+    writer.close()
+    assert writer.written == [tmp_path / "c.png"] and drawn == [2]  # the third run
+    writer.close()  # nothing more to write
+    assert writer.written == [tmp_path / "c.png"]
