@@ -32,7 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="end components exploration steers to (see RunnerSettings.candidates)",
     )
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
-    p.add_argument("--png", help="figure of the last run (default: runs/<scenario>.png)")
+    p.add_argument(
+        "--png", help="figure of the last run, .png/.svg/.pdf (default: runs/<scenario>.png)"
+    )
     p.add_argument("--no-rrd", action="store_true", help="write no recording")
     p.add_argument("--no-png", action="store_true", help="write no figure")
     p.add_argument(
@@ -154,6 +156,14 @@ def run(args: argparse.Namespace) -> int:
     stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
     rrd = None if args.no_rrd else Path(args.rrd or f"runs/{stem}.rrd")
     png = None if args.no_png else Path(args.png or f"runs/{stem}.png")
+    if png is not None:
+        from hopper_sim.figures import FigureError, figure_format
+
+        try:
+            figure_format(png)
+        except FigureError as err:
+            print(f"hopnav run: {err}", file=sys.stderr)
+            return 2
     for path in (rrd, png):
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -169,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
     if recorder is not None:
         observers.append(recorder)
     if png is not None:
-        observers.append(FigureWriter(png))
+        observers.append(FigureWriter(png, n_runs=n_runs))
     fan = Observers(observers)
     try:
         settings = RunnerSettings(candidates=args.explore_to)

@@ -1,8 +1,9 @@
 """``hopnav scenario NAME_OR_PATH``: validate a scenario file and show what it describes.
 
 Prints the scenario's settings and a text map of its grid (or, with ``--json``, the parsed
-settings as JSON); ``--png FILE`` also draws the empty world as a figure. A scenario with a
-problem fails with exit code 2 and the message names the key and the line.
+settings as JSON); ``--png FILE`` also draws the empty world as a figure (PNG, SVG or PDF by
+the file's extension, titled with the formula and P_sat, with the region legend). A scenario
+with a problem fails with exit code 2 and the message names the key and the line.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
     )
     p.add_argument("scenario", help="shipped name (a, b, c, d) or path to a scenario TOML")
-    p.add_argument("--png", help="also draw the world to this PNG file")
+    p.add_argument("--png", help="also draw the world to this figure (.png, .svg or .pdf)")
     p.add_argument("--json", action="store_true", help="print the settings as JSON")
     p.set_defaults(func=run)
 
@@ -34,6 +35,14 @@ def run(args: argparse.Namespace) -> int:
     except ScenarioError as err:
         print(f"hopnav scenario: {err}", file=sys.stderr)
         return 2
+    if args.png:
+        from hopper_sim.figures import FigureError, check_destination
+
+        try:
+            check_destination(args.png)
+        except FigureError as err:
+            print(f"hopnav scenario: {err}", file=sys.stderr)
+            return 2
     if args.json:
         print(
             json.dumps(

@@ -5,7 +5,9 @@ Runs ``--runs`` complete navigation runs for each cell of the grid
 (default: case study ``a``), in parallel worker processes (``--backend process``, the
 default), in this process (``serial``) or on a Ray cluster (``ray``, optional extra). Prints
 the table beside the paper's and writes ``sweep_runs.csv`` (one row per run),
-``sweep_summary.csv`` (per cell, 95 % Student-t intervals) and ``table_i.md`` to ``--out``.
+``sweep_summary.csv`` (per cell, 95 % Student-t intervals), ``table_i.md`` and the plot
+``table_i.png`` (reward and steps with their intervals against C and eps, the paper's values
+overlaid; :mod:`hopper_sim.sweep_plot`) to ``--out``.
 The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
 number of workers.
 
@@ -137,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     paths = write_outputs(result, args.out)
+    from hopper_sim.sweep_plot import PLOT_FILE, write_table_plot
+
+    paths["plot"] = write_table_plot(result.cells, Path(args.out) / PLOT_FILE)
     if args.json:
         record = result.to_json()
         record["files"] = {k: str(v) for k, v in paths.items()}
