@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -23,6 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart
+from hopper_sim.provenance import as_text
 from hopper_sim.styles import INITIAL_COLOR, label_colors
 from planner.atomic import atomic_write
 from planner.scenario import Scenario
@@ -66,6 +68,7 @@ def render_run_figure(
     run_index: int | None = None,
     size_inches: tuple[float, float] = (6.0, 6.0),
     dpi: int = 100,
+    metadata: dict[str, Any] | None = None,
 ) -> Path:
     """Draw one run over its scenario and write it as a PNG of ``size_inches * dpi`` pixels.
 
@@ -77,6 +80,8 @@ def render_run_figure(
         run_index: shown in the title (default: from ``end`` or the hops).
         size_inches: figure size; with ``dpi`` it sets the pixel size exactly.
         dpi: dots per inch.
+        metadata: written as PNG text chunks, values as text (e.g. the provenance of
+            :func:`hopper_sim.provenance.provenance`).
 
     Returns:
         The path written.
@@ -150,8 +155,9 @@ def render_run_figure(
         title += f": {len(hops)} hops"
     ax.set_title(title, fontsize=10)
 
+    text = {"Software": "hopnav", **as_text(metadata or {})}
     with atomic_write(path) as f:
-        fig.savefig(f, format="png", dpi=dpi)
+        fig.savefig(f, format="png", dpi=dpi, metadata=text)
     return path
 
 
@@ -162,7 +168,7 @@ class FigureWriter(Observer):
         path: where to write: a callable ``run_index -> path``, or a path that may hold
             ``{run}`` (formatted with the run index). A fixed path is overwritten by every
             run, so it keeps the last run's figure (the paper shows the tenth run of (c)/(d)).
-        size_inches, dpi: as in :func:`render_run_figure`.
+        size_inches, dpi, metadata: as in :func:`render_run_figure`.
 
     Attributes:
         written: the paths written, in order.
@@ -174,8 +180,10 @@ class FigureWriter(Observer):
         *,
         size_inches: tuple[float, float] = (6.0, 6.0),
         dpi: int = 100,
+        metadata: dict[str, Any] | None = None,
     ) -> None:
         self._path = path
+        self.metadata = metadata
         self.size_inches = size_inches
         self.dpi = dpi
         self._scenario: dict[int, Scenario] = {}
@@ -206,5 +214,6 @@ class FigureWriter(Observer):
             end=event,
             size_inches=self.size_inches,
             dpi=self.dpi,
+            metadata=self.metadata,
         )
         self.written.append(out)

@@ -16,6 +16,8 @@ recording. All positions are world metres, z up.
 Entity paths (``K`` is the run index)::
 
     world/info                   TextDocument  scenario name, formula, settings   (static)
+    world/provenance             AnyValues     scenario digest, checkpoint hash,  (static)
+                                               version, commit (hopper_sim.provenance)
     world/grid                   LineStrips3D  cell borders                       (static)
     world/cells/initial          Boxes3D       initial region (blue)              (static)
     world/cells/<label>          Boxes3D       cells of each label, coloured      (static)
@@ -63,6 +65,7 @@ import numpy as np
 import rerun as rr
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
+from hopper_sim.provenance import as_text
 from hopper_sim.styles import INITIAL_COLOR, LANDING_COLOR, TRAJECTORY_COLOR, label_colors
 
 APPLICATION_ID = "hopnav"
@@ -96,6 +99,8 @@ class RerunRecorder(Observer):
         flush_every: hops buffered per run before they are written as columns (they are
             also written at each synthesis, at the run's end and on close); logging in
             columns costs far less per hop than one ``log`` call per entity and hop.
+        provenance: what produced the recording (:func:`hopper_sim.provenance.provenance`),
+            logged as ``world/provenance`` (values as text; ``None`` values left out).
 
     Use as a context manager, or call :meth:`close` after the last run: the file appears at
     ``path`` only then. Leaving the context by an exception discards the recording.
@@ -111,6 +116,7 @@ class RerunRecorder(Observer):
         application_id: str = APPLICATION_ID,
         recording_id: str | None = None,
         flush_every: int = 100,
+        provenance: dict[str, Any] | None = None,
     ) -> None:
         if flush_every < 1:
             raise RecordingError(f"flush_every must be at least 1, got {flush_every}")
@@ -128,6 +134,9 @@ class RerunRecorder(Observer):
         self._landings: dict[int, list[np.ndarray]] = {}
         self._sim_time: dict[int, float] = {}
         self._closed = False
+        if provenance:
+            values = {k: v for k, v in as_text(provenance).items() if v}
+            self._rec.log("world/provenance", rr.AnyValues(**values), static=True)
 
     # -- context manager -------------------------------------------------------------
     def __enter__(self) -> RerunRecorder:
@@ -447,11 +456,23 @@ def _read_chunks(path: Path) -> tuple[list, Any]:
     return chunks, stores[0]
 
 
+def _data_rows(chunk: Any) -> list[dict[str, Any]]:
+    """The rows of a chunk's data columns (AnyValues fields), single values unwrapped."""
+    batch = chunk.to_record_batch()
+    names = [
+        n
+        for n in batch.schema.names
+        if (batch.schema.field(n).metadata or {}).get(b"rerun:kind") == b"data"
+    ]
+    return [{n: _first(batch.column(n)[i].as_py()) for n in names} for i in range(batch.num_rows)]
+
+
 def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
     """What a recording holds, read back with ``rerun.chunk.RrdReader``.
 
     Returns:
-        ``{"path", "application_id", "recording_id", "entities": [sorted entity paths],
+        ``{"path", "application_id", "recording_id", "provenance" (the values of
+        ``world/provenance`` as text, ``{}`` if absent), "entities": [sorted entity paths],
         "timelines": [sorted names], "runs": [per run, by index: {"run_index", "seed",
         "scenario", "hops" (rows of run_K/hops), "outcome" (None if the run did not end),
         "steps", "reward", "switch_step", "p_switch", "backups", "seconds",
@@ -467,6 +488,7 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
     timelines: set[str] = set()
     runs: dict[int, dict[str, Any]] = {}
     hop_rows: dict[int, list[dict[str, Any]]] = {}
+    provenance: dict[str, Any] = {}
 
     def run(k: int) -> dict[str, Any]:
         return runs.setdefault(
@@ -493,20 +515,14 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
         entities.add(entity.lstrip("/"))
         timelines.update(t for t in chunk.timeline_names if t != "log_time")
         match = _RUN_RE.match(entity)
+        if entity.lstrip("/") == "world/provenance":
+            provenance.update(_data_rows(chunk)[-1] if chunk.num_rows else {})
         if not match:
             continue
         k, rest = int(match.group(1)), match.group(2)
         if rest not in ("hops", "summary", "info"):
             continue
-        batch = chunk.to_record_batch()
-        names = [
-            n
-            for n in batch.schema.names
-            if (batch.schema.field(n).metadata or {}).get(b"rerun:kind") == b"data"
-        ]
-        rows = [
-            {n: _first(batch.column(n)[i].as_py()) for n in names} for i in range(batch.num_rows)
-        ]
+        rows = _data_rows(chunk)
         if rest == "hops":
             hop_rows.setdefault(k, []).extend(rows)
             run(k)
@@ -527,6 +543,7 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
         "path": str(path),
         "application_id": store.application_id,
         "recording_id": store.recording_id,
+        "provenance": provenance,
         "entities": sorted(entities),
         "timelines": sorted(timelines),
         "runs": [runs[k] for k in sorted(runs)],
