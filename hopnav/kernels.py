@@ -6,7 +6,7 @@ import sys
 import threading
 
 
-def prepare_kernels(prog: str, quiet: bool = False, after: float = 0.5) -> float:
+def prepare_kernels(prog: str, quiet: bool = False, after: float = 2.0) -> float:
     """:func:`planner.warmup.compile_kernels`, with a line on stderr when it takes longer than
     ``after`` seconds (a fresh installation compiles them, later runs load numba's cache).
 
@@ -20,8 +20,8 @@ def prepare_kernels(prog: str, quiet: bool = False, after: float = 0.5) -> float
     def notice() -> None:
         said.set()
         sys.stderr.write(
-            f"{prog}: compiling the value-iteration kernels (numba; once per installation, "
-            "then cached)...\n"
+            f"{prog}: preparing the value-iteration kernels (numba compiles them once per "
+            "installation and caches them)...\n"
         )
         sys.stderr.flush()
 

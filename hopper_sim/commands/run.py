@@ -89,7 +89,10 @@ class _Progress:
             self.bar = None
 
     def close(self) -> None:
-        pass
+        """Close the bar of a run that did not end (interrupted or failed)."""
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
 
 
 def summary_table(ends) -> str:
@@ -171,21 +174,19 @@ def _load_learner(path: str, expected: dict):
     return learner
 
 
-def _controller(path: str | None):
-    """(checkpoint path, model, controller) for ``--checkpoint`` (default: the shipped one)."""
-    from hopper_sim.controller import DEFAULT_CHECKPOINT, LegAngleController, load_checkpoint
+def _controller(ckpt_path: Path):
+    """(model, controller) for the checkpoint ``ckpt_path``, checked against the MJCF."""
+    from hopper_sim.controller import LegAngleController, load_checkpoint
     from hopper_sim.controller.errors import ControllerError
     from hopper_sim.model import HopperModel
 
-    ckpt_path = Path(path) if path is not None else DEFAULT_CHECKPOINT
     model = HopperModel.load()
     try:
-        input_file(ckpt_path, "--checkpoint")
         ckpt = load_checkpoint(ckpt_path, expected_param_hash=model.param_hash())
         controller = LegAngleController.from_checkpoint(ckpt)
     except ControllerError as err:
         raise UsageError(f"--checkpoint: {err}") from None
-    return ckpt_path, model, controller
+    return model, controller
 
 
 def _records(ends, files: dict, prov: dict) -> list[dict]:
@@ -233,22 +234,25 @@ def run(args: argparse.Namespace) -> int:
     png = None if args.no_png else output_file(args.png or f"runs/{stem}.png", "--png", (".png",))
     if args.q_table:
         output_file(args.q_table, "--q-table")
+    from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
+    from hopper_sim.provenance import provenance
+
+    ckpt_path = input_file(args.checkpoint or DEFAULT_CHECKPOINT, "--checkpoint")
+    prov = provenance(sc, ckpt_path)  # of the scenario as loaded, before the overrides below
+    learner = None
+    if args.q_table and Path(args.q_table).exists():
+        learner = _load_learner(args.q_table, prov)
 
     from hopper_sim.environment import HopperGridEnv
     from hopper_sim.events import Observers
     from hopper_sim.figures import FigureWriter
-    from hopper_sim.provenance import provenance
     from hopper_sim.recording import RerunRecorder
     from hopper_sim.runner import NavigationRunner, RunnerSettings
 
-    ckpt_path, model, controller = _controller(args.checkpoint)
-    prov = provenance(sc, ckpt_path)  # of the scenario as loaded, before the overrides below
+    model, controller = _controller(ckpt_path)
     if args.max_steps is not None:
         sc = sc.with_runner(max_steps=args.max_steps)
     n_runs = sc.runner.runs if args.runs is None else args.runs
-    learner = None
-    if args.q_table and Path(args.q_table).exists():
-        learner = _load_learner(args.q_table, prov)
     settings = RunnerSettings(candidates=args.explore_to)
     env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
     try:
@@ -261,7 +265,8 @@ def run(args: argparse.Namespace) -> int:
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
     finished = _Finished()
-    observers = [finished, _Progress(sc.runner.max_steps, n_runs, args.quiet or args.json)]
+    progress = _Progress(sc.runner.max_steps, n_runs, args.quiet or args.json)
+    observers = [finished, progress]
     recorder = RerunRecorder(rrd, provenance=prov) if rrd is not None else None
     if recorder is not None:
         observers.append(recorder)
@@ -280,6 +285,7 @@ def run(args: argparse.Namespace) -> int:
     if failure is None:
         fan.close()
     else:
+        progress.close()
         _keep_finished(finished, recorder, files)
     if args.q_table and runner.learner is not None:
         runner.learner.save(args.q_table, metadata={"provenance": prov})

@@ -69,10 +69,11 @@ def run(args: argparse.Namespace) -> int:
         print(ascii_map(sc))
     if args.png:
         from hopper_sim.figures import FigureError, render_run_figure
+        from hopper_sim.provenance import provenance
 
         Path(args.png).parent.mkdir(parents=True, exist_ok=True)
         try:
-            render_run_figure(sc, [], args.png)
+            render_run_figure(sc, [], args.png, metadata=provenance(sc))
         except FigureError as err:
             raise UsageError(str(err)) from None
     return 0

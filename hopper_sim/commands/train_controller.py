@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.controller.steady import steady_state
     from hopper_sim.controller.training import TrainConfig, train_hop_model
     from hopper_sim.model import HopperModel
+    from hopper_sim.provenance import provenance
 
     torch.set_num_threads(args.torch_threads)
     model = HopperModel.load()
@@ -200,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
         "train_config": {**config.__dict__, "hidden": list(config.hidden)},
         "dataset": {k: v for k, v in dataset.metadata.items() if k != "ranges"},
         "samples": len(dataset),
+        "provenance": provenance(None),
     }
     path = save_checkpoint(HopModelCheckpoint(result.net, param_hash, metadata), args.out)
     print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
