@@ -1,6 +1,6 @@
 """Robust Q-learning on interval MDPs with the minimising (state-ordering) adversary.
 
-Reward ``W`` is collected on *landing* (DESIGN.md), so for a row ``(s, a)`` with interval
+Reward ``W`` is collected on *landing* (docs/design.md), so for a row ``(s, a)`` with interval
 bounds ``l <= p <= u`` the robust Q-value is the worst case over the interval polytope::
 
     Q(s, a) = min_{l <= p <= u, sum p = 1}  sum_{s'} p(s') (W(s') + gamma V(s')),
