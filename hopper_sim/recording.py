@@ -560,6 +560,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = [
         f"recording {summary['path']} (application {summary['application_id']}, "
         f"id {summary['recording_id']})",
+        "provenance: "
+        + (", ".join(f"{k} {v}" for k, v in summary.get("provenance", {}).items()) or "-"),
         f"timelines: {', '.join(summary['timelines']) or '-'}",
         f"entities ({len(summary['entities'])}):",
         *(f"  {e}" for e in summary["entities"]),

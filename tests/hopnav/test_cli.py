@@ -106,3 +106,56 @@ def test_an_unexpected_error_is_one_line(hopnav, monkeypatch):
     monkeypatch.setenv("HOPNAV_DEBUG", "1")
     with pytest.raises(RuntimeError):
         hopnav("automaton", "F a")
+
+
+def test_kernel_notice(capsys):
+    from hopnav.kernels import prepare_kernels
+
+    prepare_kernels("hopnav test", after=0.0)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("hopnav test: preparing the value-iteration kernels")
+    assert err[1].startswith("hopnav test: kernels ready in")
+    prepare_kernels("hopnav test", quiet=True, after=0.0)
+    assert capsys.readouterr().err == ""
+
+
+FIRST_SYNTHESIS = """
+import numba
+import numpy as np
+from planner.imdp import kernels
+from planner.warmup import compile_kernels
+
+def signatures():
+    return {n: len(d.signatures) for n, d in vars(kernels).items()
+            if isinstance(d, numba.core.registry.CPUDispatcher)}
+
+compile_kernels()
+before = signatures()
+from planner.gp.landing import LandingErrorGP
+from planner.imdp.grid import GridWorld
+from planner.learning import resynthesise
+from planner.ltl.translate import translate
+from planner.scenario import load_scenario
+sc = load_scenario("a")
+w = sc.world
+grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
+reward = np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0)
+none = np.zeros((0, 2))
+resynthesise(LandingErrorGP(), grid, translate(sc.formula), none, none, reward=reward,
+             initial_cell=sc.start_cell)
+after = signatures()
+assert sum(before.values()) > 0, before
+print("NEW", {n: after[n] - before[n] for n in after if after[n] != before[n]})
+"""
+
+
+def test_first_synthesis_compiles_nothing_after_the_warm_up():
+    proc = subprocess.run(
+        [sys.executable, "-c", FIRST_SYNTHESIS],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.strip().splitlines()[-1] == "NEW {}"

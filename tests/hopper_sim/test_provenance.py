@@ -81,6 +81,9 @@ def test_run_writes_provenance_everywhere(tmp_path, capsys):
         for k, v in want.items()
         if v is not None
     }
+    assert main(["replay", str(rrd), "--summary"]) == 0
+    shown = capsys.readouterr().out
+    assert f"scenario_sha256 {want['scenario_sha256']}" in shown
     text = Image.open(png).text
     assert text["scenario_sha256"] == want["scenario_sha256"]
     assert text["checkpoint_sha256"] == want["checkpoint_sha256"]

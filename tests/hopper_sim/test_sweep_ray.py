@@ -24,10 +24,10 @@ def test_real_runs_on_local_ray_equal_the_process_backend():
     spec = SweepSpec(cs=(0.25, 0.75), epss=(0.005,), runs=1, seed=3)
     done: list[int] = []
     on_ray = run_sweep(
-        scenario, spec, backend="ray", workers=2, progress=lambda d, t, row: done.append(d)
+        scenario, spec, backend="ray", workers=1, progress=lambda d, t, row: done.append(d)
     )
     assert not ray.is_initialized()  # the sweep started its own instance and shut it down
-    in_processes = run_sweep(scenario, spec, backend="process", workers=2)
+    in_processes = run_sweep(scenario, spec, backend="process", workers=1)
     assert on_ray.backend == "ray" and in_processes.backend == "process"
     assert done == [1, 2] and len(on_ray.rows) == spec.n_runs
     assert all(r.steps >= 1 for r in on_ray.rows)
