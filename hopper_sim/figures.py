@@ -22,9 +22,10 @@ of ``hopnav run``, ``hopnav replay`` and the recording's entity paths.
 
 from __future__ import annotations
 
+import json
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart
+from hopper_sim.provenance import as_text
 from hopper_sim.styles import (
     GRID_COLOR,
     INITIAL_COLOR,
@@ -99,20 +101,33 @@ def check_destination(path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int = PNG_DPI) -> Path:
-    """Write ``fig`` atomically in the format of ``path``'s extension, without a date."""
+def save_figure(
+    fig: Figure,
+    path: str | os.PathLike[str],
+    *,
+    dpi: int = PNG_DPI,
+    metadata: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write ``fig`` atomically in the format of ``path``'s extension, without a date.
+
+    ``metadata`` (e.g. the provenance of :func:`hopper_sim.provenance.provenance`) goes where
+    each format has room for it: one PNG text chunk per key (values as text), and the whole
+    record as JSON in the SVG's Dublin Core ``Description`` and the PDF's ``Subject``.
+    """
     import matplotlib
 
     path = check_destination(path)
     fmt = figure_format(path)
-    metadata: dict[str, Any] = {
-        "png": {"Software": None},
-        "svg": {"Date": None, "Creator": None},
-        "pdf": {"CreationDate": None, "Creator": None, "Producer": None},
+    record = as_text(metadata or {})
+    as_json = json.dumps(record, sort_keys=True) if record else None
+    meta: dict[str, Any] = {
+        "png": {"Software": None, **record},
+        "svg": {"Date": None, "Creator": None, "Description": as_json},
+        "pdf": {"CreationDate": None, "Creator": None, "Producer": None, "Subject": as_json},
     }[fmt]
     with matplotlib.rc_context({"svg.hashsalt": "hopnav", "svg.fonttype": "path"}):
         with atomic_write(path) as f:
-            fig.savefig(f, format=fmt, dpi=dpi, metadata=metadata)
+            fig.savefig(f, format=fmt, dpi=dpi, metadata=meta)
     return path
 
 
@@ -542,9 +557,10 @@ def render_figure(
     size_inches: tuple[float, float] | None = None,
     dpi: int = PNG_DPI,
     columns: int = 2,
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Draw ``panels`` (:func:`build_figure`) and write them to ``path`` (``.png``, ``.svg``
-    or ``.pdf``; its folder must exist).
+    or ``.pdf``; its folder must exist), with ``metadata`` as in :func:`save_figure`.
 
     Returns:
         The path written.
@@ -554,7 +570,7 @@ def render_figure(
     """
     check_destination(path)
     fig = build_figure(panels, size_inches=size_inches, dpi=dpi, columns=columns)
-    return save_figure(fig, path, dpi=dpi)
+    return save_figure(fig, path, dpi=dpi, metadata=metadata)
 
 
 def route_cover(scenario: Scenario, route: Route | None) -> np.ndarray:
@@ -594,6 +610,7 @@ def render_run_figure(
     n_runs: int | None = None,
     size_inches: tuple[float, float] | None = None,
     dpi: int = PNG_DPI,
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Draw one run (or, with no hops and no ``end``, the empty world) and write it.
 
@@ -605,12 +622,16 @@ def render_run_figure(
         run_index: the 0-based run index (shown 1-based; default from ``end`` or the hops).
         n_runs: runs in the invocation, for the title (``run 10 of 10``).
         size_inches, dpi: as in :func:`render_figure`.
+        metadata: written into the file (e.g. the provenance of
+            :func:`hopper_sim.provenance.provenance`), as in :func:`save_figure`.
 
     Raises:
         FigureError: an unknown extension, a missing folder or a bad size.
     """
     if not hops and end is None and run_index is None:
-        return render_figure([Panel(scenario)], path, size_inches=size_inches, dpi=dpi)
+        return render_figure(
+            [Panel(scenario)], path, size_inches=size_inches, dpi=dpi, metadata=metadata
+        )
     k = run_index if run_index is not None else (end.run_index if end else None)
     if k is None and hops:
         k = hops[0].run_index
@@ -622,7 +643,13 @@ def render_run_figure(
         end=end,
         hops=len(hops),
     )
-    return render_figure([Panel(scenario, route, title)], path, size_inches=size_inches, dpi=dpi)
+    return render_figure(
+        [Panel(scenario, route, title)],
+        path,
+        size_inches=size_inches,
+        dpi=dpi,
+        metadata=metadata,
+    )
 
 
 class FigureWriter(Observer):
@@ -636,6 +663,7 @@ class FigureWriter(Observer):
             :meth:`close`. The extension chooses the format.
         n_runs: runs in the invocation, for the titles.
         size_inches, dpi: as in :func:`render_figure`.
+        metadata: written into every figure, as in :func:`render_run_figure`.
 
     Attributes:
         written: the paths written, in order.
@@ -651,12 +679,14 @@ class FigureWriter(Observer):
         n_runs: int | None = None,
         size_inches: tuple[float, float] | None = None,
         dpi: int = PNG_DPI,
+        metadata: Mapping[str, Any] | None = None,
     ) -> None:
         if not callable(path):
             figure_format(path)
         self._path = path
         self._per_run = callable(path) or "{run}" in str(path)
         self.n_runs = n_runs
+        self.metadata = metadata
         self.size_inches = size_inches
         self.dpi = dpi
         self._scenario: dict[int, Scenario] = {}
@@ -703,5 +733,6 @@ class FigureWriter(Observer):
             n_runs=self.n_runs,
             size_inches=self.size_inches,
             dpi=self.dpi,
+            metadata=self.metadata,
         )
         self.written.append(out)

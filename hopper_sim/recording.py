@@ -35,6 +35,8 @@ Entity paths::
 
     world/scenario               AnyValues     the scenario as JSON (redraws the figure)  (static)
     world/info                   TextDocument  scenario name, formula, settings           (static)
+    world/provenance             AnyValues     scenario digest, checkpoint hash, version,
+                                               commit (hopper_sim.provenance)             (static)
     world/legend                 TextDocument  region classes: letter, colour, reward;
                                                route colours                              (static)
     world/ground, world/grid     Boxes3D, LineStrips3D  white floor and cell borders      (static)
@@ -96,6 +98,7 @@ import numpy as np
 import rerun as rr
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
+from hopper_sim.provenance import as_text
 from hopper_sim.rerun_blueprint import blueprint, legend_markdown
 from hopper_sim.styles import (
     GRID_COLOR,
@@ -205,6 +208,8 @@ class RerunRecorder(Observer):
             also written at each synthesis, at the run's end and on close).
         com_samples: at most this many CoM samples per hop are recorded (evenly thinned in
             time, first and last kept), for the arc and the animated CoM.
+        provenance: what produced the recording (:func:`hopper_sim.provenance.provenance`),
+            logged as ``world/provenance`` (values as text; ``None`` values left out).
 
     Use as a context manager, or call :meth:`close` after the last run: the file appears at
     ``path`` only then. Leaving the context by an exception discards the recording.
@@ -221,6 +226,7 @@ class RerunRecorder(Observer):
         recording_id: str | None = None,
         flush_every: int = 100,
         com_samples: int = 48,
+        provenance: dict[str, Any] | None = None,
     ) -> None:
         if flush_every < 1:
             raise RecordingError(f"flush_every must be at least 1, got {flush_every}")
@@ -243,6 +249,9 @@ class RerunRecorder(Observer):
         self._runs: list[int] = []
         self._cell = 1.0
         self._closed = False
+        if provenance:
+            values = {k: v for k, v in as_text(provenance).items() if v}
+            self._rec.log("world/provenance", rr.AnyValues(**values), static=True)
 
     # -- context manager -------------------------------------------------------------
     def __enter__(self) -> RerunRecorder:

@@ -77,7 +77,8 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     Returns:
         ``{"path", "application_id", "recording_id", "blueprint" (whether the file holds a
-        blueprint), "entities": [sorted entity paths], "timelines": [sorted names],
+        blueprint), "provenance" (the values of ``world/provenance`` as text, ``{}`` if
+        absent), "entities": [sorted entity paths], "timelines": [sorted names],
         "runs": [per run, by number: {"run" (1-based), "seed", "scenario", "hops" (rows of
         run_K/hops), "outcome" (None if the run did not end), "reason", "steps", "reward",
         "switch_step", "p_switch", "backups", "seconds", "sim_seconds",
@@ -93,6 +94,7 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
     timelines: set[str] = set()
     runs: dict[int, dict[str, Any]] = {}
     hop_rows: dict[int, list[dict[str, Any]]] = {}
+    provenance: dict[str, Any] = {}
     keys = ("seed", "scenario", "outcome", "reason", "steps", "reward", "switch_step")
     keys += ("p_switch", "backups", "seconds", "sim_seconds")
 
@@ -105,6 +107,8 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
             continue  # rerun's own properties
         entities.add(entity.lstrip("/"))
         timelines.update(t for t in chunk.timeline_names if t != "log_time")
+        if entity.lstrip("/") == "world/provenance" and chunk.num_rows:
+            provenance.update(_data_rows(chunk)[0][-1])
         match = _RUN_RE.match(entity)
         if not match:
             continue
@@ -133,6 +137,7 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
         "application_id": store.application_id,
         "recording_id": store.recording_id,
         "blueprint": has_blueprint,
+        "provenance": provenance,
         "entities": sorted(entities),
         "timelines": sorted(timelines),
         "runs": [runs[k] for k in sorted(runs)],
@@ -150,6 +155,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"recording {summary['path']} (application {summary['application_id']}, "
         f"id {summary['recording_id']}, {'with' if summary.get('blueprint') else 'no'} "
         "blueprint)",
+        "provenance: "
+        + (", ".join(f"{k} {v}" for k, v in summary.get("provenance", {}).items()) or "-"),
         f"timelines: {', '.join(summary['timelines']) or '-'}",
         f"entities ({len(summary['entities'])}):",
         *(f"  {e}" for e in summary["entities"]),

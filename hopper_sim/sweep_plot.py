@@ -17,9 +17,9 @@ exceed the paper's by an order of magnitude; the axis label says so.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,15 +48,18 @@ def write_table_plot(
     *,
     title: str = "",
     dpi: int = PNG_DPI,
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Draw the Table I plot of ``cells`` (:func:`build_table_plot`) and write it to ``path``
-    (``.png``, ``.svg`` or ``.pdf``; its folder must exist).
+    (``.png``, ``.svg`` or ``.pdf``; its folder must exist), with ``metadata`` (e.g. the
+    sweep's provenance) as in :func:`~hopper_sim.figures.save_figure`.
 
     Raises:
         FigureError: no cells, an unknown extension or a missing folder.
     """
     check_destination(path)
-    return save_figure(build_table_plot(cells, title=title, dpi=dpi), path, dpi=dpi)
+    fig = build_table_plot(cells, title=title, dpi=dpi)
+    return save_figure(fig, path, dpi=dpi, metadata=metadata)
 
 
 def build_table_plot(cells: Sequence[CellSummary], *, title: str = "", dpi: int = PNG_DPI):

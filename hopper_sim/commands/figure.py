@@ -14,8 +14,9 @@ Three sources, one at a time:
 One map is drawn with its legend beside it; several form a grid of two columns with one
 legend below (``a,b,c,d`` gives the 2 x 2 panel). Each ``--out`` file (repeatable) gets the
 same figure, its format chosen by the extension (``.png`` at 200 dpi, ``.svg``, ``.pdf``);
-destinations are checked before anything runs. Exit code 2 for bad input, 1 for a run that
-failed.
+destinations are checked before anything runs. Each file carries the provenance of
+:mod:`hopper_sim.provenance` (per drawn scenario, joined with commas). Errors follow
+:mod:`hopnav.errors`: exit code 2 for bad input, 1 for a run that failed.
 
 Example: ``hopnav figure --scenarios a,b,c,d --out fig4.pdf --out fig4.png``.
 """
@@ -25,12 +26,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
+
+from hopnav.arguments import figure_file, output_folder
+from hopnav.errors import RunFailed, UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "figure",
-        help="draw Figure 4 (runs scenarios or reads recordings) or the Table I plot",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -56,54 +60,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-class _Fail(Exception):
-    """A one-line error with its exit code."""
-
-    def __init__(self, message: str, code: int = 2) -> None:
-        super().__init__(message)
-        self.code = code
-
-
 def run(args: argparse.Namespace) -> int:
-    from hopper_sim.figures import FigureError, check_destination
+    outs = [figure_file(p, "--out") for p in args.out]
+    for name, value, low in (
+        ("--run", args.run, 1),
+        ("--runs", args.runs, 1),
+        ("--max-steps", args.max_steps, 1),
+        ("--seed", args.seed, 0),
+    ):
+        if value is not None and value < low:
+            raise UsageError(f"{name} must be at least {low}, got {value}")
+    if args.save_rrd:
+        output_folder(args.save_rrd, "--save-rrd")
+    from hopper_sim.figures import FigureError
 
     try:
-        outs = [check_destination(p) for p in _prepare(args.out)]
-        for name, value, low in (("--run", args.run, 1), ("--runs", args.runs, 1)):
-            if value is not None and value < low:
-                raise _Fail(f"{name} must be at least {low}, got {value}")
-        if args.max_steps is not None and args.max_steps < 1:
-            raise _Fail(f"--max-steps must be at least 1, got {args.max_steps}")
-        if args.table_i:
-            written = _table_i(args, outs)
-        else:
-            written = _figure4(args, outs)
+        written = _table_i(args, outs) if args.table_i else _figure4(args, outs)
     except FigureError as err:
-        print(f"hopnav figure: {err}", file=sys.stderr)
-        return 2
-    except _Fail as err:
-        print(f"hopnav figure: {err}", file=sys.stderr)
-        return err.code
+        raise UsageError(str(err)) from None
     for path in written:
         print(path)
     return 0
 
 
-def _prepare(paths: list[str]) -> list[Path]:
-    """The output paths, their folders created."""
-    from hopper_sim.figures import figure_format
+def _save(fig, outs: list[Path], metadata: dict[str, Any]) -> list[Path]:
+    """Write ``fig`` to every path of ``outs`` (their folders created)."""
+    from hopper_sim.figures import save_figure
 
-    out = []
-    for p in paths:
-        path = Path(p)
-        figure_format(path)  # unknown extension: fail before creating anything
-        path.parent.mkdir(parents=True, exist_ok=True)
-        out.append(path)
-    return out
+    for out in outs:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    return [save_figure(fig, out, metadata=metadata) for out in outs]
+
+
+def _provenance(records: list[dict[str, Any]], **extra: str) -> dict[str, Any]:
+    """The provenance of a figure drawn from the results of ``records`` (one
+    :func:`~hopper_sim.provenance.provenance` per panel): the per-scenario fields joined with
+    commas, the code's and the checkpoint's shared, and ``extra``."""
+    from hopper_sim.provenance import as_text, provenance
+
+    texts = [as_text(r) for r in records] or [as_text(provenance(None))]
+    joined = {k: ",".join(r[k] for r in texts) for k in ("scenario", "scenario_sha256")}
+    return {**texts[0], **joined, **extra}
 
 
 def _table_i(args: argparse.Namespace, outs: list[Path]) -> list[Path]:
-    from hopper_sim.figures import save_figure
     from hopper_sim.sweep import summarize
     from hopper_sim.sweep_files import SweepFileError, read_rows_csv
     from hopper_sim.sweep_plot import build_table_plot
@@ -111,34 +111,36 @@ def _table_i(args: argparse.Namespace, outs: list[Path]) -> list[Path]:
     try:
         rows = read_rows_csv(args.table_i)
     except SweepFileError as err:
-        raise _Fail(str(err)) from err
+        raise UsageError(str(err)) from None
     if not rows:
-        raise _Fail(f"{args.table_i} holds no runs")
+        raise UsageError(f"{args.table_i} holds no runs")
     fig = build_table_plot(summarize(rows))
-    return [save_figure(fig, out) for out in outs]
+    return _save(fig, outs, _provenance([], source=str(args.table_i)))
 
 
 def _figure4(args: argparse.Namespace, outs: list[Path]) -> list[Path]:
-    from hopper_sim.figures import Panel, build_figure, run_title, save_figure
+    from hopper_sim.figures import Panel, build_figure, run_title
 
     panels = _from_recordings(args) if args.rrd else _from_scenarios(args)
     drawn = [
         Panel(sc, route, run_title(sc, run_number=k, n_runs=n, end=end, hops=route.n_hops))
-        for sc, route, end, k, n in panels
+        for sc, route, end, k, n, _ in panels
     ]
     fig = build_figure(drawn)
-    return [save_figure(fig, out) for out in outs]
+    extra = {"source": ",".join(args.rrd)} if args.rrd else {}
+    return _save(fig, outs, _provenance([prov for *_, prov in panels], **extra))
 
 
 def _pick(n_runs: int, wanted: int | None, where: str) -> int:
     """The 1-based run to draw of ``n_runs``."""
     k = n_runs if wanted is None else wanted
     if not 1 <= k <= n_runs:
-        raise _Fail(f"--run {k}: {where} has runs 1..{n_runs}")
+        raise UsageError(f"--run {k}: {where} has runs 1..{n_runs}")
     return k
 
 
 def _from_recordings(args: argparse.Namespace) -> list[tuple]:
+    from hopper_sim.provenance import provenance
     from hopper_sim.recording import RecordingError, read_runs
 
     panels = []
@@ -146,34 +148,41 @@ def _from_recordings(args: argparse.Namespace) -> list[tuple]:
         try:
             sc, runs = read_runs(path)
         except RecordingError as err:
-            raise _Fail(str(err)) from err
+            raise UsageError(str(err)) from None
         by_number = {r.run: r for r in runs}
         if not runs:
-            raise _Fail(f"{path} holds no runs")
+            raise UsageError(f"{path} holds no runs")
         if args.run is not None and args.run not in by_number:
-            raise _Fail(f"--run {args.run}: {path} has runs {', '.join(map(str, by_number))}")
+            raise UsageError(f"--run {args.run}: {path} has runs {', '.join(map(str, by_number))}")
         rec = by_number[args.run] if args.run is not None else runs[-1]
-        panels.append((sc, rec.route, rec.end, rec.run, len(runs)))
+        # the digest of the scenario as recorded (with the run's overrides); the code that
+        # made the recording is named in the recording's own world/provenance
+        prov = provenance(sc)
+        panels.append((sc, rec.route, rec.end, rec.run, len(runs), prov))
     return panels
 
 
 def _from_scenarios(args: argparse.Namespace) -> list[tuple]:
+    from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
+    from hopper_sim.provenance import provenance
     from planner.errors import PlannerError
     from planner.scenario import load_scenario
 
     names = [s.strip() for s in (args.scenarios or "a,b,c,d").split(",") if s.strip()]
     if not names:
-        raise _Fail("--scenarios names no scenario")
+        raise UsageError("--scenarios names no scenario")
     scenarios = []
     for name in names:  # all checked before the first run
         try:
             sc = load_scenario(name)
         except PlannerError as err:
-            raise _Fail(str(err)) from err
+            raise UsageError(str(err)) from None
+        prov = provenance(sc, DEFAULT_CHECKPOINT)  # as loaded, before --max-steps
         if args.max_steps is not None:
             sc = sc.with_runner(max_steps=args.max_steps)
         n = sc.runner.runs if args.runs is None else args.runs
-        scenarios.append((name, sc, n, _pick(n, args.run, f"scenario {sc.name} ({n} runs)")))
+        k = _pick(n, args.run, f"scenario {sc.name} ({n} runs)")
+        scenarios.append((name, sc, n, k, prov))
     save = Path(args.save_rrd) if args.save_rrd else None
     if save is not None:
         save.mkdir(parents=True, exist_ok=True)
@@ -198,25 +207,27 @@ def _from_scenarios(args: argparse.Namespace) -> list[tuple]:
                 self.end = event
 
     panels = []
-    for name, sc, n, k in scenarios:
+    for name, sc, n, k, prov in scenarios:
         keep = Keep(k - 1)
         observers: list = [keep]
         recorder = None
         if save is not None:
             stem = Path(name).stem if name.endswith(".toml") else sc.name
             try:
-                recorder = RerunRecorder(save / f"{stem}.rrd")
+                recorder = RerunRecorder(save / f"{stem}.rrd", provenance=prov)
             except RecordingError as err:
-                raise _Fail(str(err)) from err
+                raise UsageError(str(err)) from None
             observers.append(recorder)
         if not args.quiet:
             print(f"hopnav figure: running scenario {sc.name} ({n} runs)...", file=sys.stderr)
         try:
             NavigationRunner(sc, observer=Observers(observers)).run_many(n, args.seed)
-        except Exception as err:
+        except BaseException as err:
             if recorder is not None:
                 recorder.discard()
-            raise _Fail(f"scenario {sc.name}: the run failed: {err}", code=1) from err
+            if isinstance(err, Exception):
+                raise RunFailed(f"scenario {sc.name}: the run failed: {err}") from err
+            raise
         if recorder is not None:
             recorder.close()
         end = keep.end
@@ -227,5 +238,5 @@ def _from_scenarios(args: argparse.Namespace) -> list[tuple]:
                 file=sys.stderr,
             )
         route = Route.from_hops(keep.hops, sc.start, end.switch_step if end else None)
-        panels.append((sc, route, end, k, n))
+        panels.append((sc, route, end, k, n, prov))
     return panels

@@ -19,11 +19,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+from hopnav.errors import UsageError
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "replay",
-        help="open a .rrd recording in the rerun viewer, or print its summary headlessly",
         description=__doc__,
     )
     p.add_argument("file", help="the .rrd recording")
@@ -51,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = summarize_recording(args.file)
     except RecordingError as err:
-        print(f"hopnav replay: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0

@@ -11,13 +11,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
+from pathlib import Path
+
+from hopnav.arguments import figure_file
+from hopnav.errors import UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "scenario",
-        help="validate a scenario (shipped name a-d or a TOML path) and print its map",
         description=__doc__,
     )
     p.add_argument("scenario", help="shipped name (a, b, c, d) or path to a scenario TOML")
@@ -33,16 +35,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         sc = load_scenario(args.scenario)
     except ScenarioError as err:
-        print(f"hopnav scenario: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     if args.png:
-        from hopper_sim.figures import FigureError, check_destination
-
-        try:
-            check_destination(args.png)
-        except FigureError as err:
-            print(f"hopnav scenario: {err}", file=sys.stderr)
-            return 2
+        figure_file(args.png, "--png")
     if args.json:
         print(
             json.dumps(
@@ -75,10 +70,11 @@ def run(args: argparse.Namespace) -> int:
         print(ascii_map(sc))
     if args.png:
         from hopper_sim.figures import FigureError, render_run_figure
+        from hopper_sim.provenance import provenance
 
+        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
         try:
-            render_run_figure(sc, [], args.png)
+            render_run_figure(sc, [], args.png, metadata=provenance(sc))
         except FigureError as err:
-            print(f"hopnav scenario: {err}", file=sys.stderr)
-            return 2
+            raise UsageError(str(err)) from None
     return 0
