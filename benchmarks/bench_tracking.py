@@ -1,4 +1,4 @@
-"""Landing accuracy of the controller over chained MuJoCo hops (issue 7 acceptance).
+"""Landing accuracy of the controller over chained MuJoCo hops (the acceptance check).
 
     python benchmarks/bench_tracking.py [--hops 1000] [--seed 0] [--perturbed]
 

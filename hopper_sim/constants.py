@@ -1,14 +1,16 @@
 """Names of the MJCF elements the simulation reads or drives, and the model file paths.
 
-Every physical value lives in ``models/*.xml``; Python refers to it only through the names
-below (see ``models/README.md``).
+Every physical value lives in ``hopper_sim/models/*.xml`` (package data, found with
+:mod:`importlib.resources`, so an installed wheel reads its own copy); Python refers to it
+only through the names below (see ``hopper_sim/models/README.md``).
 """
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
-MODELS_DIR: Path = Path(__file__).resolve().parent.parent / "models"
+MODELS_DIR: Path = Path(str(resources.files("hopper_sim") / "models"))
 HOPPER_XML: Path = MODELS_DIR / "hopper.xml"
 SCENE_XML: Path = MODELS_DIR / "scene.xml"
 

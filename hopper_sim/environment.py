@@ -2,10 +2,15 @@
 
 dm_control's split: :class:`~hopper_sim.model.HopperModel` is the physics, the
 :class:`~planner.scenario.Scenario` (world, labels, rewards) the task, and
-:class:`HopperGridEnv` joins them with Gymnasium's conventions:
-``reset(seed=...) -> (observation, info)`` and
-``step(action, allowed=...) -> (observation, reward, terminated, truncated, info)``. The loop
-that chooses the actions (planning, learning, observers) is :mod:`hopper_sim.runner`.
+:class:`HopperGridEnv` joins them as a Gymnasium environment:
+``reset(seed=..., options=...) -> (observation, info)`` and
+``step(action, allowed=...) -> (observation, reward, terminated, truncated, info)``, with
+``action_space`` ``Discrete(8)``, a ``Dict`` ``observation_space`` and ``close()``. With
+gymnasium installed (the ``gym`` extra) it is a :class:`gymnasium.Env` (registered as
+``hopnav/HopperGrid-v0`` when :mod:`hopper_sim` is imported) and passes
+``gymnasium.utils.env_checker.check_env``; without it, the same class works without the
+spaces (``None``). The loop that chooses the actions (planning, learning, observers) is
+:mod:`hopper_sim.runner`.
 
 One step is one hop. The grid action (``N1, N2, E1, E2, S1, S2, W1, W2``: 1 or 2 cells north,
 east, south or west, aiming at the target cell's centre) is turned into touchdown angles by
@@ -19,13 +24,19 @@ regulates the energy to that of steady hopping.
 Observation: the interstitial state, ``{"pos": (2,) m, "vel": (3,) m/s, "cell": int}``, the
 cell a flat index ``i * ny + j`` (``nx * ny`` = off the map). Reward: the scenario's reward of
 the cell landed in (``W``, collected on landing). ``terminated`` when the hopper lands in a
-hazard cell or off the map, or a hop fails (the hopper fell: ``info["hop"].status`` says why);
-reaching the goal is the task's business (the automaton), not the environment's.
+hazard cell or off the map, or a hop fails (the hopper fell: ``info["step"].hop.status`` says
+why); reaching the goal is the task's business (the automaton), not the environment's.
+``truncated`` when the episode reaches ``max_steps`` hops (default: the scenario's step cap)
+without terminating. ``info["action_mask"]`` (``int8``, one per action) marks the actions
+whose target cell lies inside the world from the current cell (the abstraction's enabled
+actions). A Gymnasium agent may still step a masked action: the hopper then aims at that
+target outside the world and, landing there, leaves the map (``terminated``); the runner
+passes ``allowed`` and gets an :class:`EpisodeError` for such an action instead.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, is_dataclass
 from typing import Any
 
 import numpy as np
@@ -37,8 +48,18 @@ from hopper_sim.hop import HopResult, simulate_hop
 from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.terrain import TerrainField
-from planner.imdp.grid import ACTIONS, GridWorld
-from planner.scenario import Scenario
+from planner.imdp.grid import ACTION_OFFSETS, ACTIONS, GridWorld
+from planner.scenario import Scenario, load_scenario
+
+try:  # the optional `gym` extra
+    import gymnasium
+    from gymnasium import spaces
+
+    _EnvBase: type = gymnasium.Env
+except ImportError:  # pragma: no cover - exercised where gymnasium is absent
+    gymnasium = None
+    spaces = None
+    _EnvBase = object
 
 
 class EpisodeError(RuntimeError):
@@ -64,10 +85,30 @@ class EnvSettings:
     record_paths: bool = True
 
 
-@dataclass(frozen=True)
+def _same(a: Any, b: Any) -> bool:
+    """Equality through dataclasses, sequences and arrays (NaN equal to NaN)."""
+    if is_dataclass(a) and not isinstance(a, type):
+        return type(a) is type(b) and all(
+            _same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a)
+        )
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        numeric = a.dtype.kind in "fc" and b.dtype.kind in "fc"
+        return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=numeric))
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b):
+        return True
+    return bool(a == b)
+
+
+@dataclass(frozen=True, eq=False)
 class StepInfo:
     """What a step did: the controller's decision, the hop, the target of the executed action
-    (world m) and the landing error ``landing - target`` (m) that the GPs learn."""
+    (world m) and the landing error ``landing - target`` (m) that the GPs learn.
+
+    Two are equal when every field is (arrays element-wise), so that Gymnasium's
+    determinism checks can compare the ``info`` of two identical steps."""
 
     decision: HopDecision
     hop: HopResult
@@ -75,27 +116,48 @@ class StepInfo:
     target: np.ndarray
     error: np.ndarray | None
 
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, StepInfo) and _same(self, other)
 
-class HopperGridEnv:
+    __hash__ = None  # type: ignore[assignment]
+
+
+class HopperGridEnv(_EnvBase):
     """The hopper in a grid world (see the module docstring).
 
     Args:
-        scenario: the world and its labels and rewards.
+        scenario: the world and its labels and rewards, or a shipped name / TOML path.
         model: the hopper physics (default: the shipped MJCF).
         controller: the leg-angle controller (default: the shipped checkpoint, checked
             against ``model``'s parameter hash).
         settings: physics switches.
+        max_steps: hops after which an episode is truncated (default: the scenario's
+            ``runner.max_steps``).
+
+    Attributes:
+        action_space: ``Discrete(8)``, the actions of :data:`planner.imdp.grid.ACTIONS`
+            (``None`` without gymnasium).
+        observation_space: ``Dict(pos=Box(2), vel=Box(3), cell=Discrete(nx * ny + 1))``
+            (``None`` without gymnasium).
     """
+
+    metadata = {"render_modes": []}  # noqa: RUF012 - Gymnasium's class attribute
 
     def __init__(
         self,
-        scenario: Scenario,
+        scenario: Scenario | str,
         *,
         model: HopperModel | None = None,
         controller: LegAngleController | None = None,
         settings: EnvSettings | None = None,
+        max_steps: int | None = None,
     ) -> None:
+        if not isinstance(scenario, Scenario):
+            scenario = load_scenario(scenario)
         self.scenario = scenario
+        self.max_steps = int(scenario.runner.max_steps if max_steps is None else max_steps)
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, got {max_steps}")
         self.settings = settings or EnvSettings()
         self.model = model or HopperModel.load()
         if controller is None:
@@ -115,8 +177,26 @@ class HopperGridEnv:
         self._data = self.model.make_data()
         self._rng: np.random.Generator | None = None
         self._done = True
+        self._steps = 0
         self.pos = np.zeros(2)
         self.vel = np.zeros(3)
+        # target centre of every action from every cell, also of those leaving the world
+        i, j = np.divmod(np.arange(self.grid.n_cells), self.grid.ny)
+        offsets = np.asarray(ACTION_OFFSETS, dtype=float)
+        self._target_centres = (
+            np.stack([i, j], axis=-1)[:, None, :].astype(float) + offsets[None] + 0.5
+        ) * self.grid.cell
+        self.action_space = None
+        self.observation_space = None
+        if spaces is not None:
+            self.action_space = spaces.Discrete(len(ACTIONS))
+            self.observation_space = spaces.Dict(
+                {
+                    "pos": spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float64),
+                    "vel": spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float64),
+                    "cell": spaces.Discrete(self.grid.n_cells + 1),
+                }
+            )
 
     @property
     def cell(self) -> int:
@@ -125,39 +205,80 @@ class HopperGridEnv:
     def observation(self) -> dict[str, Any]:
         return {"pos": self.pos.copy(), "vel": self.vel.copy(), "cell": self.cell}
 
-    def reset(self, *, seed: int | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
-        """Start an episode at the scenario's start, in the steady gait heading east.
+    def action_mask(self, cell: int | None = None) -> np.ndarray:
+        """``(8,)`` ``int8``: 1 for the actions enabled in ``cell`` (default: the current
+        one; all 0 off the map)."""
+        cell = self.cell if cell is None else int(cell)
+        if cell >= self.grid.n_cells:
+            return np.zeros(len(ACTIONS), dtype=np.int8)
+        return self.grid.enabled[cell].astype(np.int8)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Start an episode at the scenario's start (or ``options["start"]``, ``(x, y)`` m in
+        the world), in the steady gait heading east.
 
         ``seed`` seeds the episode's generator (the landing noise); ``None`` keeps drawing
-        from the previous generator (a fresh unseeded one on the first reset).
+        from the previous generator (a fresh unseeded one on the first reset). The generator
+        is ``numpy.random.default_rng(seed)``, as Gymnasium's ``np_random``.
+
+        Raises:
+            ValueError: an unknown option, or a start outside the world.
         """
-        if seed is not None or self._rng is None:
+        options = dict(options or {})
+        start = options.pop("start", self.scenario.start)
+        if options:
+            raise ValueError(f"unknown reset option(s) {sorted(options)}; known: 'start'")
+        pos = np.asarray(start, dtype=float).reshape(-1)
+        w = self.scenario.world
+        if pos.shape != (2,) or not (0 <= pos[0] < w.width and 0 <= pos[1] < w.height):
+            raise ValueError(
+                f"start {start!r} must be (x, y) inside the {w.width} x {w.height} m world"
+            )
+        if _EnvBase is not object:
+            super().reset(seed=seed)
+            self._rng = self.np_random
+        elif seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
-        self.pos = np.asarray(self.scenario.start, dtype=float).copy()
+        self.pos = pos.copy()
         self.vel = self.controller.steady.velocity.copy()
         self._done = False
-        return self.observation(), {}
+        self._steps = 0
+        return self.observation(), {"action_mask": self.action_mask()}
+
+    def close(self) -> None:
+        """End the episode; the environment needs :meth:`reset` before the next step."""
+        self._done = True
 
     def targets(self, cell: int, actions: np.ndarray) -> np.ndarray:
-        """Target positions (world m) of ``actions`` from ``cell``, ``(len(actions), 2)``."""
-        return self.grid.target_centres[cell, np.asarray(actions, dtype=int)]
+        """Target positions (world m) of ``actions`` from ``cell``, ``(len(actions), 2)``
+        (also of actions whose target lies outside the world)."""
+        return self._target_centres[cell, np.asarray(actions, dtype=int)]
 
     def step(
         self, action: int, allowed: np.ndarray | None = None
     ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
         """One hop towards ``action``'s target; ``allowed`` (action ids) are the backup's
-        choices (default: every enabled action of the current cell)."""
+        choices (default: every enabled action of the current cell, and ``action`` itself
+        when its target lies outside the world, see the module docstring)."""
         if self._done or self._rng is None:
             raise EpisodeError("step() needs reset() first (and a running episode)")
         cell = self.cell
+        action = int(action)
+        if not 0 <= action < len(ACTIONS):
+            raise EpisodeError(f"action {action} is not one of 0..{len(ACTIONS) - 1}")
         enabled = np.flatnonzero(self.grid.enabled[cell])
-        acts = enabled if allowed is None else np.asarray(allowed, dtype=int)
-        if action not in acts or not self.grid.enabled[cell, action]:
-            raise EpisodeError(
-                f"action {ACTIONS[action] if 0 <= action < len(ACTIONS) else action} is not "
-                f"enabled and allowed in cell {cell} (allowed: {[ACTIONS[a] for a in acts]})"
-            )
-        acts = acts[self.grid.enabled[cell, acts]]
+        if allowed is None:
+            acts = enabled if self.grid.enabled[cell, action] else np.append(enabled, action)
+        else:
+            acts = np.asarray(allowed, dtype=int)
+            if action not in acts or not self.grid.enabled[cell, action]:
+                raise EpisodeError(
+                    f"action {ACTIONS[action]} is not enabled and allowed in cell {cell} "
+                    f"(allowed: {[ACTIONS[a] for a in acts]})"
+                )
+            acts = acts[self.grid.enabled[cell, acts]]
         decision = self.controller.decide(
             self.pos, self.vel, acts, self.targets(cell, acts), int(action)
         )
@@ -177,21 +298,34 @@ class HopperGridEnv:
             data=self._data,
         )
         target = self.targets(cell, [decision.executed])[0]
+        self._steps += 1
         if not hop.ok:
             self._done = True
             info = StepInfo(decision, hop, start, target, None)
-            return self.observation(), 0.0, True, False, {"step": info, "outcome": "fell"}
+            mask = np.zeros(len(ACTIONS), dtype=np.int8)
+            return (
+                self.observation(),
+                0.0,
+                True,
+                False,
+                {"step": info, "outcome": "fell", "action_mask": mask},
+            )
         self.pos = np.asarray(hop.next_pos, dtype=float).copy()
         self.vel = np.asarray(hop.next_vel, dtype=float).copy()
         landed = self.cell
         reward = float(self.reward_table[landed])
         hazard = bool(self.hazard_cells[landed])
-        self._done = hazard
+        truncated = not hazard and self._steps >= self.max_steps
+        self._done = hazard or truncated
         info = StepInfo(decision, hop, start, target, self.pos - target)
         return (
             self.observation(),
             reward,
             hazard,
-            False,
-            {"step": info, "outcome": "hazard" if hazard else None},
+            truncated,
+            {
+                "step": info,
+                "outcome": "hazard" if hazard else None,
+                "action_mask": self.action_mask(landed),
+            },
         )

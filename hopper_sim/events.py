@@ -87,14 +87,15 @@ class HopEvent:
         landing: CoM ``(x, y)`` at the next interstitial state, m.
         com_path: ``(T, 3)`` CoM positions from departure to the next interstitial state, m.
         foot: ``(3,)`` foot position at touchdown, m.
-        touchdown_time: time of the touchdown since the run started, s.
+        touchdown_time: time of the touchdown since the hop's departure interstitial state, s.
         cell: flat index of the landing cell (``nx * ny`` for ``out``).
         product_state: index of the product (IMDP x automaton) state after the hop.
         p_worst: worst-case satisfaction probability of that product state.
         reward: reward collected by this hop.
         total_reward: reward collected in the run so far, this hop included.
-        com_time: optional ``(T,)`` times of the ``com_path`` samples since the run
-            started, s; recorders animate the CoM along ``sim_time`` when given.
+        com_time: optional ``(T,)`` times of the ``com_path`` samples since the hop's
+            departure, s (the last one ends the hop); recorders offset them by the hop's
+            start to animate the CoM along ``sim_time``.
     """
 
     run_index: int

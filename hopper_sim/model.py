@@ -1,8 +1,8 @@
 """The compiled hopper: MJCF loaded and parameterised through :mod:`dm_control.mjcf`.
 
 Physical parameters are read back from the compiled model by name (``constants.py``), so the
-MJCF in ``models/`` is their single source. Hot loops use the raw :class:`mujoco.MjModel`
-(``HopperModel.model``) and :class:`mujoco.MjData`.
+MJCF in ``hopper_sim/models/`` (package data) is their single source. Hot loops use the raw
+:class:`mujoco.MjModel` (``HopperModel.model``) and :class:`mujoco.MjData`.
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ class HopperModel:
     def load(
         cls, overrides: dict[str, float] | None = None, path: str | Path | None = None
     ) -> HopperModel:
-        """Load ``models/scene.xml`` (or ``path``) and apply ``overrides``.
+        """Load ``hopper_sim/models/scene.xml`` (or ``path``) and apply ``overrides``.
 
         Args:
             overrides: values by key, any of :data:`OVERRIDE_KEYS`: ``mass`` [kg],

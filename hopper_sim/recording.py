@@ -1,107 +1,221 @@
-"""rerun recordings of navigation runs, and a reader that summarises them.
+"""rerun recordings of navigation runs, with a blueprint, and readers that summarise them.
 
 :class:`RerunRecorder` is an :class:`~hopper_sim.events.Observer` that writes one rerun
 recording (``.rrd``, rerun-sdk 0.41, headless file sink) per invocation. It writes to a
 temporary file beside the target and moves it into place on :meth:`RerunRecorder.close`, so
 a crashed invocation never leaves a half-written recording. Hops are buffered per run and
 written with ``send_columns`` (one call per entity for up to ``flush_every`` hops), at each
-synthesis, at the run's end and on close. :func:`summarize_recording` reads a
-recording back with rerun's own reader (``rerun.chunk.RrdReader``).
+synthesis, at the run's end and on close. Every hop adds a bounded amount of data (its CoM
+samples are thinned to at most ``com_samples``), so a recording grows linearly with the
+hops. :func:`summarize_recording` and :func:`read_runs` read a recording back with rerun's own
+reader (``rerun.chunk.RrdReader``).
 
-Timelines: ``hop`` (the hop number within a run: hop ``k`` is logged at ``hop = k``, a
-re-synthesis after ``k`` hops at ``hop = k``) and ``sim_time`` (seconds of simulated time since
-the run started). Wall-clock log times are not recorded, so the same events give the same
-recording. All positions are world metres, z up.
+Runs are numbered from 1 (``K = RunStart.run_index + 1``), as in the summary table of
+``hopnav run``, in ``hopnav replay``, in figure titles and in the entity paths below.
 
-Entity paths (``K`` is the run index)::
+Timelines:
 
-    world/info                   TextDocument  scenario name, formula, settings   (static)
-    world/grid                   LineStrips3D  cell borders                       (static)
-    world/cells/initial          Boxes3D       initial region (blue)              (static)
-    world/cells/<label>          Boxes3D       cells of each label, coloured      (static)
-    world/rewards                Points3D      cells with a reward, labelled "+20" (static;
-                                               the true rewards, also when unknown to
-                                               the planner)
-    world/start                  Points3D      start position                     (static)
-    run_K/info                   AnyValues     run_index, seed, scenario          (static)
-    run_K/hop/com_arc            LineStrips3D  this hop's CoM arc (T points)
-    run_K/hop/foot               Points3D      foot at touchdown
-    run_K/hop/leg                LineStrips3D  leg at touchdown (foot to CoM)
-    run_K/hop/target             Points3D      target cell centre of the hop
+- ``hop`` (sequence): hops completed in the run. Hop ``k`` (``HopEvent.step = k``, 0-based)
+  is logged at ``hop = k + 1``; a synthesis after ``m`` hops at ``hop = m`` (the initial one
+  at 0); the run's outcome at ``hop = steps``.
+- ``sim_time`` (duration): simulated seconds since the run started, cumulative over hops. A
+  hop's own times (``touchdown_time``, ``com_time``: seconds since its departure state) are
+  offset by the hop's start, the sum of the durations of the hops before it; a hop's duration
+  is its last CoM sample time (the next interstitial state; without samples, its touchdown
+  time, and at least 1 us), so ``sim_time`` strictly increases over a run's hops and the end
+  of hop ``k`` lies at the sum of the durations of hops ``0..k``. Each run starts again at 0.
+  Per-hop rows are logged at the hop's end, the foot, leg and target at its touchdown, the
+  CoM samples at their own times.
+
+Wall-clock time is not a timeline (the same events give the same recording); the wall-clock
+seconds of each synthesis stage are plotted under ``run_K/timings``. All positions are world
+metres, z up.
+
+Entity paths::
+
+    world/scenario               AnyValues     the scenario as JSON (redraws the figure)  (static)
+    world/info                   TextDocument  scenario name, formula, settings           (static)
+    world/provenance             AnyValues     scenario digest, checkpoint hash, version,
+                                               commit (hopper_sim.provenance)             (static)
+    world/legend                 TextDocument  region classes: letter, colour, reward;
+                                               route colours                              (static)
+    world/ground, world/grid     Boxes3D, LineStrips3D  white floor and cell borders      (static)
+    world/cells/initial          Boxes3D       initial region cells, translucent          (static)
+    world/cells/<label>          Boxes3D       cells of each label                        (static)
+    world/regions                Points3D      one label per connected region ("A +20")   (static)
+    world/start                  Points3D      start position                             (static)
+    run_K/info                   AnyValues     run, seed, scenario                        (static)
+    run_K/hop/com_arc            LineStrips3D  the hop's CoM arc, at its end
+    run_K/hop/foot, hop/leg      Points3D, LineStrips3D  foot and leg at touchdown
+    run_K/hop/target             Points3D      target cell centre, at touchdown
     run_K/hop/landing            Points3D      landing (next interstitial CoM, z = 0)
-    run_K/trajectory             LineStrips3D  all landings so far, joined
-    run_K/com                    Points3D      the CoM along sim_time (when com_time given)
+    run_K/route                  LineStrips3D  the hop's segment start -> landing, coloured by
+                                               phase (the blueprint shows all up to the cursor)
+    run_K/com                    Points3D      the CoM along sim_time
     run_K/hops                   AnyValues     step, phase, source, backup, requested_action,
                                                executed_action, cell, product_state, p_worst,
-                                               reward, total_reward (one row per hop)
-    run_K/status                 TextLog       one line per hop (phase, source, backup)
-    run_K/plots/p_worst          Scalars       worst-case satisfaction probability
+                                               reward, total_reward, duration (+ any new
+                                               scalar field of HopEvent), one row per hop
+    run_K/status                 TextLog       one line per hop
+    run_K/plots/p_worst          Scalars       worst-case satisfaction probability (P-check) of
+                                               the current product state, after each hop
+    run_K/plots/p_worst_initial  Scalars       of the initial state, at each synthesis
     run_K/plots/total_reward     Scalars       reward collected so far
-    run_K/plots/phase            Scalars       0 exploration, 1 goal reaching
+    run_K/plots/reward           Scalars       reward of the hop
+    run_K/plots/phase            Scalars       0 exploration, 1 goal reaching, 2 fallback
     run_K/plots/rl_action        Scalars       1 if the RL policy chose the action
     run_K/plots/backup           Scalars       1 if the backup switch replaced the action
-    run_K/plots/p_worst_initial  Scalars       at each synthesis
-    run_K/gp/mean_x, mean_y      Tensor        GP posterior mean of the landing error, (Gx, Gy)
-    run_K/gp/std_x, std_y        Tensor        GP posterior std of the landing error, (Gx, Gy)
+    run_K/synthesis/<field>      Scalars       any new numeric field of SynthesisEvent
+    run_K/gp/mean, gp/std        Tensor        GP posterior mean / std of the landing error,
+                                               (Gx, Gy, 2) m, at each synthesis
+    run_K/gp/image/<m>_<axis>    Image         the same as colour maps (mean: purple-orange in
+                                               [-cell, +cell], std: viridis in [0, cell],
+                                               saturated beyond; x right, y up)
     run_K/gp/mean_field          Arrows3D      GP mean error as arrows at the grid points
-    run_K/timings/<stage>        Scalars       seconds per synthesis stage
-    run_K/outcome                TextDocument  outcome line at the end of the run
-    run_K/summary                AnyValues     outcome, steps, reward, switch_step, p_switch,
-                                               backups, seconds, timing_<stage>
+    run_K/timings/<stage>        Scalars       wall-clock seconds per synthesis stage
+    run_K/outcome                TextDocument  outcome at the end of the run
+    run_K/summary                AnyValues     outcome, reason, steps, reward, switch_step,
+                                               p_switch, left_plan_step, backups, seconds,
+                                               timing_<stage> (+ any new scalar field)
+
+The blueprint (:func:`blueprint`) is sent on close: one tab per run with the 3D world large on
+the left (the route and CoM arcs so far, the current leg and foot, the legend and the outcome
+below), the time series of P-check, reward, phase, RL use and backups stacked on the right
+above the GP maps; the time panel opens on ``sim_time``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
+import math
 import os
-import re
-import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
-from hopper_sim.styles import INITIAL_COLOR, LANDING_COLOR, TRAJECTORY_COLOR, label_colors
+from hopper_sim.provenance import as_text
+from hopper_sim.rerun_blueprint import blueprint, legend_markdown
+from hopper_sim.styles import (
+    GRID_COLOR,
+    INITIAL_COLOR,
+    INITIAL_LETTER,
+    PHASE_CODES,
+    PHASE_COLORS,
+    PHASE_NAMES,
+    draw_order,
+    format_reward,
+    label_colors,
+    region_components,
+    region_letters,
+)
+
+if TYPE_CHECKING:
+    from planner.scenario import Scenario
 
 APPLICATION_ID = "hopnav"
 _FLOOR_Z = 0.0
-_RUN_RE = re.compile(r"^/?run_(\d+)/(.+)$")
+_MIN_DURATION = 1e-6
+_CELL_ALPHA = 170
+
+_HOP_FIELDS = {f.name for f in dataclasses.fields(HopEvent)}
+_SYNTHESIS_FIELDS = {f.name for f in dataclasses.fields(SynthesisEvent)}
+_END_FIELDS = {f.name for f in dataclasses.fields(RunEnd)}
 
 
 class RecordingError(ValueError):
     """A recording cannot be written or read (missing, corrupt or truncated file...)."""
 
 
-def _run(k: int) -> str:
-    return f"run_{k}"
+def run_path(run_index: int) -> str:
+    """Entity path of the run with 0-based ``run_index``: ``run_<run_index + 1>``."""
+    return f"run_{run_index + 1}"
+
+
+def hop_duration(event: HopEvent) -> float:
+    """Simulated duration of a hop, s: its last CoM sample time (departure to the next
+    interstitial state), else its touchdown time; at least 1 us."""
+    if event.com_time is not None and len(event.com_time):
+        t = float(event.com_time[-1])
+    else:
+        t = float(event.touchdown_time)
+    return t if math.isfinite(t) and t > _MIN_DURATION else _MIN_DURATION
 
 
 def _status_line(h: HopEvent) -> str:
     backup = f" (backup for {h.requested_action})" if h.backup else ""
     return (
-        f"hop {h.step}: {h.phase}, {h.source} action {h.executed_action}{backup}, "
-        f"p_worst {h.p_worst:.3f}, reward {h.reward:+g} (total {h.total_reward:+g})"
+        f"hop {h.step + 1}: {PHASE_NAMES.get(h.phase, h.phase)}, {h.source} action "
+        f"{h.executed_action}{backup}, P-check {h.p_worst:.3f}, reward {h.reward:+g} "
+        f"(total {h.total_reward:+g})"
     )
 
 
+def _thin(n: int, most: int) -> np.ndarray:
+    """At most ``most`` indices of ``range(n)``, evenly spread, first and last kept."""
+    if n <= most:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, most)).astype(np.int64))
+
+
+def _scalar(value: Any) -> bool:
+    return isinstance(value, bool | int | float | str | np.integer | np.floating)
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def scenario_record(sc: Scenario) -> dict[str, Any]:
+    """``sc`` as the dict :func:`planner.scenario.scenario_from_dict` reads (the TOML schema)."""
+
+    def region(r) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if r.rects:
+            out["rects"] = [list(map(float, x)) for x in r.rects]
+        if r.cells:
+            out["cells"] = [list(map(int, x)) for x in r.cells]
+        return out
+
+    return {
+        "name": sc.name,
+        "description": sc.description,
+        "formula": sc.formula,
+        "hazard": sc.hazard,
+        "goal": sc.goal,
+        "p_sat": float(sc.p_sat),
+        "reward_known": bool(sc.reward_known),
+        "world": {"size": [float(sc.world.width), float(sc.world.height)], "cell": sc.world.cell},
+        "initial": {**region(sc.initial), "start": [float(v) for v in sc.start]},
+        "regions": {label: region(r) for label, r in sc.regions.items()},
+        "rewards": {k: float(v) for k, v in sc.rewards.items()},
+        "runner": dataclasses.asdict(sc.runner),
+    }
+
+
 class RerunRecorder(Observer):
-    """Observer writing every event of an invocation to one ``.rrd`` file.
+    """Observer writing every event of an invocation to one ``.rrd`` file with a blueprint.
 
     Args:
         path: the ``.rrd`` file to write (its folder must exist).
         application_id: rerun application id.
         recording_id: rerun recording id (default: a fresh one).
         flush_every: hops buffered per run before they are written as columns (they are
-            also written at each synthesis, at the run's end and on close); logging in
-            columns costs far less per hop than one ``log`` call per entity and hop.
+            also written at each synthesis, at the run's end and on close).
+        com_samples: at most this many CoM samples per hop are recorded (evenly thinned in
+            time, first and last kept), for the arc and the animated CoM.
+        provenance: what produced the recording (:func:`hopper_sim.provenance.provenance`),
+            logged as ``world/provenance`` (values as text; ``None`` values left out).
 
     Use as a context manager, or call :meth:`close` after the last run: the file appears at
     ``path`` only then. Leaving the context by an exception discards the recording.
 
     Raises:
-        RecordingError: the folder of ``path`` does not exist.
+        RecordingError: the folder of ``path`` does not exist or a setting is out of range.
     """
 
     def __init__(
@@ -111,9 +225,13 @@ class RerunRecorder(Observer):
         application_id: str = APPLICATION_ID,
         recording_id: str | None = None,
         flush_every: int = 100,
+        com_samples: int = 48,
+        provenance: dict[str, Any] | None = None,
     ) -> None:
         if flush_every < 1:
             raise RecordingError(f"flush_every must be at least 1, got {flush_every}")
+        if com_samples < 2:
+            raise RecordingError(f"com_samples must be at least 2, got {com_samples}")
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise RecordingError(f"cannot write {self.path}: folder {self.path.parent} missing")
@@ -124,10 +242,16 @@ class RerunRecorder(Observer):
         self._rec.set_sinks(rr.FileSink(str(self._tmp)))
         self._world_logged: str | None = None
         self.flush_every = int(flush_every)
-        self._pending: dict[int, list[HopEvent]] = {}
-        self._landings: dict[int, list[np.ndarray]] = {}
-        self._sim_time: dict[int, float] = {}
+        self.com_samples = int(com_samples)
+        self._pending: dict[int, list[tuple[HopEvent, float]]] = {}
+        self._clock: dict[int, float] = {}
+        self._hops_done: dict[int, int] = {}
+        self._runs: list[int] = []
+        self._cell = 1.0
         self._closed = False
+        if provenance:
+            values = {k: v for k, v in as_text(provenance).items() if v}
+            self._rec.log("world/provenance", rr.AnyValues(**values), static=True)
 
     # -- context manager -------------------------------------------------------------
     def __enter__(self) -> RerunRecorder:
@@ -140,11 +264,18 @@ class RerunRecorder(Observer):
             self.discard()
 
     def close(self) -> None:
-        """Finish the file and move it to :attr:`path` (idempotent)."""
+        """Write what is buffered and the blueprint, finish the file and move it to
+        :attr:`path` (idempotent)."""
         if self._closed:
             return
         for k in list(self._pending):
             self._flush_hops(k)
+        rr.send_blueprint(
+            blueprint([k + 1 for k in sorted(self._runs)]),
+            make_active=True,
+            make_default=True,
+            recording=self._rec,
+        )
         self._closed = True
         self._rec.flush()
         self._rec.disconnect()
@@ -164,10 +295,15 @@ class RerunRecorder(Observer):
         self._rec.set_time("sim_time", duration=float(sim_time))
 
     # -- the world -------------------------------------------------------------------
-    def _log_world(self, event: RunStart) -> None:
-        sc = event.scenario
+    def _log_world(self, sc: Scenario) -> None:
         w = sc.world
         rec = self._rec
+        self._cell = float(w.cell)
+        rec.log(
+            "world/scenario",
+            rr.AnyValues(scenario_json=json.dumps(scenario_record(sc), sort_keys=True)),
+            static=True,
+        )
         info = (
             f"# Scenario {sc.name}\n\n{sc.description}\n\n"
             f"- world: {w.width} x {w.height} m, cells of {w.cell} m ({w.nx} x {w.ny})\n"
@@ -176,50 +312,69 @@ class RerunRecorder(Observer):
             f"- rewards: {dict(sc.rewards)}\n- runner: {sc.runner}\n"
         )
         rec.log("world/info", rr.TextDocument(info, media_type="text/markdown"), static=True)
+        rec.log(
+            "world/legend",
+            rr.TextDocument(legend_markdown(sc), media_type="text/markdown"),
+            static=True,
+        )
+        rec.log(
+            "world/ground",
+            rr.Boxes3D(
+                centers=[[0.5 * w.width, 0.5 * w.height, _FLOOR_Z - 0.02]],
+                half_sizes=[[0.5 * w.width, 0.5 * w.height, 0.01]],
+                colors=[(250, 250, 250)],
+                fill_mode="solid",
+            ),
+            static=True,
+        )
         xs = np.arange(w.nx + 1) * w.cell
         ys = np.arange(w.ny + 1) * w.cell
-        strips = [[[x, 0.0, _FLOOR_Z], [x, w.height, _FLOOR_Z]] for x in xs]
-        strips += [[[0.0, y, _FLOOR_Z], [w.width, y, _FLOOR_Z]] for y in ys]
+        strips = [[[x, 0.0, _FLOOR_Z + 0.006], [x, w.height, _FLOOR_Z + 0.006]] for x in xs]
+        strips += [[[0.0, y, _FLOOR_Z + 0.006], [w.width, y, _FLOOR_Z + 0.006]] for y in ys]
         rec.log(
-            "world/grid",
-            rr.LineStrips3D(strips, colors=[(160, 160, 160)], radii=[0.005]),
-            static=True,
+            "world/grid", rr.LineStrips3D(strips, colors=[GRID_COLOR], radii=[0.004]), static=True
         )
         centers = w.cell_centers().reshape(w.nx, w.ny, 2)
         half = [0.5 * w.cell, 0.5 * w.cell, 0.005]
 
-        def boxes(mask: np.ndarray, color, name: str) -> rr.Boxes3D:
+        def boxes(mask: np.ndarray, color) -> rr.Boxes3D:
             c = centers[mask]
             return rr.Boxes3D(
                 centers=np.column_stack([c, np.full(len(c), _FLOOR_Z)]),
-                half_sizes=[half] * len(c),
-                colors=[(*color, 160)],
+                half_sizes=np.tile(half, (len(c), 1)),
+                colors=[(*color, _CELL_ALPHA)],
                 fill_mode="solid",
-                labels=[name] * len(c) if len(c) < 64 else None,
             )
 
-        rec.log("world/cells/initial", boxes(sc.initial_mask, INITIAL_COLOR, "init"), static=True)
+        rec.log("world/cells/initial", boxes(sc.initial_mask, INITIAL_COLOR), static=True)
         colors = label_colors(sc.labels, sc.goal, sc.hazard)
         for label in sc.regions:
             rec.log(
-                f"world/cells/{label}",
-                boxes(sc.region_mask(label), colors[label], label),
+                f"world/cells/{label}", boxes(sc.region_mask(label), colors[label]), static=True
+            )
+        letters = region_letters(sc.labels)
+        spots, texts, tints = [], [], []
+        for label in ["initial", *draw_order(sc.labels, sc.goal, sc.hazard)]:
+            if label == "initial":
+                mask, text, color = sc.initial_mask, f"{INITIAL_LETTER} initial", INITIAL_COLOR
+            else:
+                mask = sc.region_mask(label)
+                reward = float(sc.rewards.get(label, 0.0))
+                text = f"{letters[label]} {label} {format_reward(reward)}"
+                color = colors[label]
+            for i, j in region_components(mask):
+                spots.append([*centers[i, j], 0.06])
+                texts.append(text)
+                tints.append(color)
+        if spots:
+            rec.log(
+                "world/regions",
+                rr.Points3D(spots, labels=texts, colors=tints, radii=[0.05], show_labels=True),
                 static=True,
             )
-        rewarded = sc.reward_grid != 0
-        c = centers[rewarded]
-        rec.log(
-            "world/rewards",
-            rr.Points3D(
-                np.column_stack([c, np.full(len(c), 0.05)]),
-                labels=[f"{r:+g}" for r in sc.reward_grid[rewarded]],
-                radii=[0.04],
-            ),
-            static=True,
-        )
         rec.log(
             "world/start",
-            rr.Points3D([[*sc.start, 0.05]], colors=[INITIAL_COLOR], radii=[0.12]),
+            rr.Points3D([[*sc.start, 0.05]], colors=[(255, 255, 255)], radii=[0.15]),
             static=True,
         )
 
@@ -227,84 +382,105 @@ class RerunRecorder(Observer):
     def on_run_start(self, event: RunStart) -> None:
         """Log the world (once per scenario) and the run's static info."""
         if self._world_logged != event.scenario.name:
-            self._log_world(event)
+            self._log_world(event.scenario)
             self._world_logged = event.scenario.name
         k = event.run_index
         self._flush_hops(k)
-        self._landings[k] = [np.array([*event.scenario.start, _FLOOR_Z])]
-        self._sim_time[k] = 0.0
+        self._clock[k] = 0.0
+        self._hops_done[k] = 0
+        if k not in self._runs:
+            self._runs.append(k)
         self._rec.log(
-            f"{_run(k)}/info",
-            rr.AnyValues(run_index=k, seed=int(event.seed), scenario=event.scenario.name),
+            f"{run_path(k)}/info",
+            rr.AnyValues(run=k + 1, seed=int(event.seed), scenario=event.scenario.name),
             static=True,
         )
 
     def on_hop(self, event: HopEvent) -> None:
-        """Buffer the hop; hops are written in columns at each synthesis, run end or close."""
+        """Buffer the hop at its start time; hops are written in columns at each synthesis,
+        run end, close or every ``flush_every`` hops."""
         k = event.run_index
-        self._pending.setdefault(k, []).append(event)
-        t_end = float(event.com_time[-1]) if event.com_time is not None else event.touchdown_time
-        self._sim_time[k] = max(self._sim_time.get(k, 0.0), t_end)
+        start = self._clock.get(k, 0.0)
+        self._clock[k] = start + hop_duration(event)
+        self._hops_done[k] = self._hops_done.get(k, 0) + 1
+        if k not in self._runs:
+            self._runs.append(k)
+        self._pending.setdefault(k, []).append((event, start))
         if len(self._pending[k]) >= self.flush_every:
             self._flush_hops(k)
 
     def _flush_hops(self, k: int) -> None:
-        """Write the buffered hops of run ``k`` with one ``send_columns`` per entity.
-
-        Each hop is one row at ``hop = step`` and ``sim_time = touchdown_time``.
-        """
-        hops = self._pending.pop(k, [])
-        if not hops:
+        """Write the buffered hops of run ``k`` with one ``send_columns`` per entity."""
+        pending = self._pending.pop(k, [])
+        if not pending:
             return
-        base, send, n = _run(k), self._rec.send_columns, len(hops)
+        hops = [h for h, _ in pending]
+        starts = np.array([t for _, t in pending])
+        durations = np.array([hop_duration(h) for h in hops])
+        base, send, n = run_path(k), self._rec.send_columns, len(hops)
         steps = np.array([h.step for h in hops], dtype=np.int64)
-        index = [
-            rr.TimeColumn("hop", sequence=steps),
-            rr.TimeColumn("sim_time", duration=np.array([h.touchdown_time for h in hops])),
+        at_end = [
+            rr.TimeColumn("hop", sequence=steps + 1),
+            rr.TimeColumn("sim_time", duration=starts + durations),
         ]
+        at_touchdown = [
+            rr.TimeColumn("hop", sequence=steps + 1),
+            rr.TimeColumn(
+                "sim_time",
+                duration=starts + np.minimum([h.touchdown_time for h in hops], durations),
+            ),
+        ]
+        samples = [self._thinned(h) for h in hops]
+        arcs = [s[0] for s in samples]
 
         def rows(value) -> np.ndarray:
             return np.tile(np.asarray(value), (n, 1))
 
         send(
             f"{base}/hop/com_arc",
-            index,
-            rr.LineStrips3D.columns(
-                strips=[h.com_path for h in hops], colors=rows(TRAJECTORY_COLOR)
-            ),
+            at_end,
+            rr.LineStrips3D.columns(strips=arcs, colors=rows((60, 60, 60)), radii=np.full(n, 0.01)),
         )
         feet = np.array([h.foot for h in hops])
-        send(f"{base}/hop/foot", index, rr.Points3D.columns(positions=feet, radii=np.full(n, 0.06)))
+        send(
+            f"{base}/hop/foot",
+            at_touchdown,
+            rr.Points3D.columns(positions=feet, colors=rows((0, 0, 0)), radii=np.full(n, 0.05)),
+        )
         legs = [np.stack([h.foot, self._com_at_touchdown(h)]) for h in hops]
-        send(f"{base}/hop/leg", index, rr.LineStrips3D.columns(strips=legs, radii=np.full(n, 0.02)))
+        send(
+            f"{base}/hop/leg",
+            at_touchdown,
+            rr.LineStrips3D.columns(strips=legs, colors=rows((0, 0, 0)), radii=np.full(n, 0.02)),
+        )
         targets = np.column_stack([[h.target for h in hops], np.full(n, 0.02)])
         send(
             f"{base}/hop/target",
-            index,
-            rr.Points3D.columns(positions=targets, colors=rows((0, 0, 0)), radii=np.full(n, 0.1)),
-        )
-        landings = np.column_stack([[h.landing for h in hops], np.full(n, _FLOOR_Z)])
-        send(
-            f"{base}/hop/landing",
-            index,
+            at_touchdown,
             rr.Points3D.columns(
-                positions=landings, colors=rows(LANDING_COLOR), radii=np.full(n, 0.08)
+                positions=targets, colors=rows((120, 120, 120)), radii=np.full(n, 0.08)
             ),
         )
-        done = self._landings.setdefault(k, [])
-        first = len(done)
-        done.extend(landings)
-        path = np.asarray(done)
+        landings = np.column_stack([[h.landing for h in hops], np.full(n, 0.03)])
+        phase_colors = np.array([PHASE_COLORS.get(h.phase, (128, 128, 128)) for h in hops])
         send(
-            f"{base}/trajectory",
-            index,
+            f"{base}/hop/landing",
+            at_end,
+            rr.Points3D.columns(positions=landings, colors=phase_colors, radii=np.full(n, 0.06)),
+        )
+        departures = np.column_stack([[h.start_pos for h in hops], np.full(n, 0.03)])
+        send(
+            f"{base}/route",
+            at_end,
             rr.LineStrips3D.columns(
-                strips=[path[: first + m + 1] for m in range(n)], colors=rows(LANDING_COLOR)
+                strips=np.stack([departures, landings], axis=1),
+                colors=phase_colors,
+                radii=np.full(n, 0.025),
             ),
         )
         send(
             f"{base}/hops",
-            index,
+            at_end,
             rr.AnyValues.columns(
                 step=steps,
                 phase=[h.phase for h in hops],
@@ -317,11 +493,13 @@ class RerunRecorder(Observer):
                 p_worst=np.array([h.p_worst for h in hops], dtype=float),
                 reward=np.array([h.reward for h in hops], dtype=float),
                 total_reward=np.array([h.total_reward for h in hops], dtype=float),
+                duration=durations,
+                **_extra_columns(hops),
             ),
         )
         send(
             f"{base}/status",
-            index,
+            at_end,
             rr.TextLog.columns(
                 text=[_status_line(h) for h in hops],
                 level=["WARN" if h.backup else "INFO" for h in hops],
@@ -330,31 +508,52 @@ class RerunRecorder(Observer):
         plots = {
             "p_worst": [h.p_worst for h in hops],
             "total_reward": [h.total_reward for h in hops],
-            "phase": [1.0 if h.phase == "goal_reaching" else 0.0 for h in hops],
+            "reward": [h.reward for h in hops],
+            "phase": [PHASE_CODES.get(h.phase, np.nan) for h in hops],
             "rl_action": [1.0 if h.source == "RL" else 0.0 for h in hops],
             "backup": [1.0 if h.backup else 0.0 for h in hops],
         }
         for name, values in plots.items():
-            send(f"{base}/plots/{name}", index, rr.Scalars.columns(scalars=np.asarray(values)))
-        timed = [h for h in hops if h.com_time is not None]
+            send(f"{base}/plots/{name}", at_end, rr.Scalars.columns(scalars=np.asarray(values)))
+        timed = [(s, t0) for s, t0 in zip(samples, starts, strict=True) if s[1] is not None]
         if timed:
             send(
                 f"{base}/com",
                 [
-                    rr.TimeColumn("sim_time", duration=np.concatenate([h.com_time for h in timed])),
+                    rr.TimeColumn(
+                        "sim_time", duration=np.concatenate([t0 + s[1] for s, t0 in timed])
+                    ),
                     rr.TimeColumn(
                         "hop",
-                        sequence=np.concatenate([np.full(len(h.com_path), h.step) for h in timed]),
+                        sequence=np.concatenate(
+                            [
+                                np.full(len(s[0]), h.step + 1)
+                                for (s, _), h in zip(timed, hops, strict=False)
+                            ]
+                        ),
                     ),
                 ],
-                rr.Points3D.columns(positions=np.concatenate([h.com_path for h in timed])),
+                rr.Points3D.columns(positions=np.concatenate([s[0] for s, _ in timed])),
             )
+
+    def _thinned(self, event: HopEvent) -> tuple[np.ndarray, np.ndarray | None]:
+        """The hop's CoM samples (and their times since departure) thinned to
+        ``com_samples``; a hop without samples gets its departure and landing."""
+        path = event.com_path
+        if len(path) < 2:
+            z = path[0, 2] if len(path) else 1.0
+            return np.array([[*event.start_pos, z], [*event.landing, z]]), None
+        idx = _thin(len(path), self.com_samples)
+        times = None if event.com_time is None else np.asarray(event.com_time)[idx]
+        return path[idx], times
 
     @staticmethod
     def _com_at_touchdown(event: HopEvent) -> np.ndarray:
         """CoM at touchdown: interpolated in ``com_time`` if given, else the path point
         nearest to the foot (the CoM is above the foot at touchdown, at leg length)."""
         path = event.com_path
+        if not len(path):
+            return np.asarray(event.foot) + np.array([0.0, 0.0, 1.0])
         if event.com_time is not None and len(path) > 1:
             return np.array(
                 [np.interp(event.touchdown_time, event.com_time, path[:, d]) for d in range(3)]
@@ -364,14 +563,20 @@ class RerunRecorder(Observer):
     def on_synthesis(self, event: SynthesisEvent) -> None:
         """Log the GP maps, the initial state's worst-case probability and stage timings."""
         k, rec = event.run_index, self._rec
-        base = _run(k)
+        base = run_path(k)
         self._flush_hops(k)
-        self._time(event.step, self._sim_time.get(k, 0.0))
+        self._time(event.step, self._clock.get(k, 0.0))
+        rec.log(f"{base}/gp/mean", rr.Tensor(event.gp_mean, dim_names=("x", "y", "axis")))
+        rec.log(f"{base}/gp/std", rr.Tensor(event.gp_std, dim_names=("x", "y", "axis")))
         for d, axis in enumerate("xy"):
             rec.log(
-                f"{base}/gp/mean_{axis}", rr.Tensor(event.gp_mean[..., d], dim_names=("x", "y"))
+                f"{base}/gp/image/mean_{axis}",
+                rr.Image(_color_map(event.gp_mean[..., d], "PuOr", -self._cell, self._cell)),
             )
-            rec.log(f"{base}/gp/std_{axis}", rr.Tensor(event.gp_std[..., d], dim_names=("x", "y")))
+            rec.log(
+                f"{base}/gp/image/std_{axis}",
+                rr.Image(_color_map(event.gp_std[..., d], "viridis", 0.0, self._cell)),
+            )
         gx, gy = np.meshgrid(event.grid_x, event.grid_y, indexing="ij")
         origins = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, 0.03)])
         vectors = np.column_stack([event.gp_mean.reshape(-1, 2), np.zeros(gx.size)])
@@ -382,178 +587,111 @@ class RerunRecorder(Observer):
         rec.log(f"{base}/plots/p_worst_initial", rr.Scalars(float(event.p_worst_initial)))
         for stage, seconds in event.timings.items():
             rec.log(f"{base}/timings/{stage}", rr.Scalars(float(seconds)))
+        extra: dict[str, Any] = {}
+        for name in sorted({f.name for f in dataclasses.fields(event)} - _SYNTHESIS_FIELDS):
+            value = getattr(event, name)
+            if _number(value):
+                rec.log(f"{base}/synthesis/{name}", rr.Scalars(float(value)))
+            elif isinstance(value, dict) and all(_number(v) for v in value.values()):
+                for key, v in value.items():
+                    rec.log(f"{base}/synthesis/{name}/{key}", rr.Scalars(float(v)))
+            elif value is not None:
+                extra[name] = value if _scalar(value) else json.dumps(_jsonable(value))
+        if extra:
+            rec.log(f"{base}/synthesis", rr.AnyValues(**extra))
 
     def on_run_end(self, event: RunEnd) -> None:
-        """Log the outcome line and the run's summary record."""
+        """Log the outcome text and the run's summary record."""
         k, rec = event.run_index, self._rec
-        base = _run(k)
+        base = run_path(k)
         self._flush_hops(k)
-        self._time(event.steps, self._sim_time.get(k, 0.0))
+        self._time(event.steps, self._clock.get(k, 0.0))
         switch = (
-            f"switched at hop {event.switch_step} (p_worst {event.p_switch:.3f})"
+            f"switched to goal reaching at hop {event.switch_step + 1} "
+            f"(P-check {event.p_switch:.3f})"
             if event.switch_step is not None and event.p_switch is not None
             else "never switched to goal reaching"
         )
+        reason = getattr(event, "reason", "")
+        left = getattr(event, "left_plan_step", None)
+        left_text = "" if left is None else f"; left the switch's plan at hop {left + 1}"
         rec.log(
             f"{base}/outcome",
             rr.TextDocument(
-                f"run {k}: {event.outcome} after {event.steps} hops, reward {event.reward:g}, "
-                f"{switch}, {event.backups} backups, {event.seconds:.1f} s"
+                f"# Run {k + 1}: {event.outcome}\n\n"
+                f"{reason or event.outcome} after {event.steps} hops "
+                f"({self._clock.get(k, 0.0):.2f} s simulated, {event.seconds:.1f} s wall); "
+                f"reward {event.reward:g}; {switch}{left_text}; {event.backups} backups.\n",
+                media_type="text/markdown",
             ),
         )
         timings = {f"timing_{name}": float(v) for name, v in event.timings.items()}
+        extra = {
+            name: getattr(event, name)
+            for name in sorted({f.name for f in dataclasses.fields(event)} - _END_FIELDS)
+            if _scalar(getattr(event, name))
+        }
         rec.log(
             f"{base}/summary",
             rr.AnyValues(
                 outcome=event.outcome,
+                reason=str(reason),
                 steps=int(event.steps),
                 reward=float(event.reward),
                 switch_step=None if event.switch_step is None else int(event.switch_step),
                 p_switch=None if event.p_switch is None else float(event.p_switch),
+                left_plan_step=None if left is None else int(left),
                 backups=int(event.backups),
                 seconds=float(event.seconds),
+                sim_seconds=float(self._clock.get(k, 0.0)),
                 **timings,
+                **extra,
             ),
         )
 
 
-# --------------------------------------------------------------------------- reading
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value if value is None or _scalar(value) else str(value)
 
 
-def _first(value: Any) -> Any:
-    """AnyValues columns hold one list per row; unwrap single values."""
-    if isinstance(value, list):
-        return value[0] if len(value) == 1 else value
-    return value
-
-
-def _read_chunks(path: Path) -> tuple[list, Any]:
-    from rerun.chunk import RrdReader
-
-    if not path.is_file():
-        raise RecordingError(f"no recording at {path}: file not found")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # rerun warns about footer-less (legacy) files
-            reader = RrdReader(path)
-            stores = reader.recordings()
-            if not stores:
-                raise RecordingError(f"{path} holds no rerun recording")
-            chunks = reader.stream(store=stores[0]).to_chunks()
-    except RecordingError:
-        raise
-    except (RuntimeError, ValueError, OSError) as err:
-        raise RecordingError(f"{path} is not a readable rerun recording: {err}") from err
-    return chunks, stores[0]
-
-
-def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """What a recording holds, read back with ``rerun.chunk.RrdReader``.
-
-    Returns:
-        ``{"path", "application_id", "recording_id", "entities": [sorted entity paths],
-        "timelines": [sorted names], "runs": [per run, by index: {"run_index", "seed",
-        "scenario", "hops" (rows of run_K/hops), "outcome" (None if the run did not end),
-        "steps", "reward", "switch_step", "p_switch", "backups", "seconds",
-        "final_total_reward" (total_reward of the last hop row), "phases" (hops per phase),
-        "sources" (hops per source), "backup_hops"}]}``.
-
-    Raises:
-        RecordingError: the file is missing, not an ``.rrd``, truncated or holds no recording.
-    """
-    path = Path(path)
-    chunks, store = _read_chunks(path)
-    entities: set[str] = set()
-    timelines: set[str] = set()
-    runs: dict[int, dict[str, Any]] = {}
-    hop_rows: dict[int, list[dict[str, Any]]] = {}
-
-    def run(k: int) -> dict[str, Any]:
-        return runs.setdefault(
-            k,
-            {
-                "run_index": k,
-                "seed": None,
-                "scenario": None,
-                "hops": 0,
-                "outcome": None,
-                "steps": None,
-                "reward": None,
-                "switch_step": None,
-                "p_switch": None,
-                "backups": None,
-                "seconds": None,
-            },
-        )
-
-    for chunk in chunks:
-        entity = str(chunk.entity_path)
-        if entity.startswith("/__"):
-            continue  # rerun's own properties
-        entities.add(entity.lstrip("/"))
-        timelines.update(t for t in chunk.timeline_names if t != "log_time")
-        match = _RUN_RE.match(entity)
-        if not match:
+def _extra_columns(hops: list[HopEvent]) -> dict[str, Any]:
+    """Columns for HopEvent fields this recorder does not know: each that holds the same
+    scalar type (bool, int, float, str) in every hop; others are left out."""
+    out: dict[str, Any] = {}
+    names = {f.name for f in dataclasses.fields(hops[0])} - _HOP_FIELDS
+    for name in sorted(names):
+        values = [getattr(h, name) for h in hops]
+        kinds = {type(v) for v in values}
+        if len(kinds) != 1 or not _scalar(values[0]):
             continue
-        k, rest = int(match.group(1)), match.group(2)
-        if rest not in ("hops", "summary", "info"):
-            continue
-        batch = chunk.to_record_batch()
-        names = [
-            n
-            for n in batch.schema.names
-            if (batch.schema.field(n).metadata or {}).get(b"rerun:kind") == b"data"
-        ]
-        rows = [
-            {n: _first(batch.column(n)[i].as_py()) for n in names} for i in range(batch.num_rows)
-        ]
-        if rest == "hops":
-            hop_rows.setdefault(k, []).extend(rows)
-            run(k)
-        else:
-            for row in rows:
-                run(k).update({n: v for n, v in row.items() if n != "run_index"})
-
-    for k, rows in hop_rows.items():
-        rows.sort(key=lambda r: r.get("step", 0))
-        r = run(k)
-        r["hops"] = len(rows)
-        r["final_total_reward"] = rows[-1].get("total_reward") if rows else None
-        r["phases"] = _count(rows, "phase")
-        r["sources"] = _count(rows, "source")
-        r["backup_hops"] = sum(bool(row.get("backup")) for row in rows)
-
-    return {
-        "path": str(path),
-        "application_id": store.application_id,
-        "recording_id": store.recording_id,
-        "entities": sorted(entities),
-        "timelines": sorted(timelines),
-        "runs": [runs[k] for k in sorted(runs)],
-    }
+        out[name] = values if isinstance(values[0], str) else np.asarray(values)
+    return out
 
 
-def _count(rows: list[dict[str, Any]], key: str) -> dict[str, int]:
-    values, counts = np.unique([str(row.get(key)) for row in rows], return_counts=True)
-    return {str(v): int(c) for v, c in zip(values, counts, strict=True)}
+def _color_map(values: np.ndarray, cmap: str, low: float, high: float) -> np.ndarray:
+    """``(Gx, Gy)`` values as an RGB image ``(Gy, Gx, 3)`` uint8, x to the right, y up."""
+    from matplotlib import colormaps
+
+    scaled = np.clip((np.asarray(values, dtype=float) - low) / (high - low), 0.0, 1.0)
+    rgb = colormaps[cmap](np.nan_to_num(scaled, nan=0.5))[..., :3]
+    return np.ascontiguousarray((255 * rgb).round().astype(np.uint8).transpose(1, 0, 2)[::-1])
 
 
-def format_summary(summary: dict[str, Any]) -> str:
-    """A plain-text rendering of :func:`summarize_recording`'s result."""
-    lines = [
-        f"recording {summary['path']} (application {summary['application_id']}, "
-        f"id {summary['recording_id']})",
-        f"timelines: {', '.join(summary['timelines']) or '-'}",
-        f"entities ({len(summary['entities'])}):",
-        *(f"  {e}" for e in summary["entities"]),
-        f"runs: {len(summary['runs'])}",
-    ]
-    for r in summary["runs"]:
-        outcome = r["outcome"] or "unfinished"
-        reward = "-" if r["reward"] is None else f"{r['reward']:g}"
-        switch = "-" if r["switch_step"] is None else str(r["switch_step"])
-        lines.append(
-            f"  run {r['run_index']}: {r['hops']} hops, outcome {outcome}, reward {reward}, "
-            f"switch step {switch}, backups {r['backups'] if r['backups'] is not None else '-'}"
-        )
-    return "\n".join(lines)
+_READERS = ("summarize_recording", "format_summary", "read_runs", "RecordedRun")
+
+
+def __getattr__(name: str) -> Any:
+    """The readers live in :mod:`hopper_sim.recording_reader` (imported on first use)."""
+    if name in _READERS:
+        from hopper_sim import recording_reader
+
+        return getattr(recording_reader, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,6 +1,6 @@
 """The navigation loop: plan on the learned interval abstraction, hop in MuJoCo, learn, repeat.
 
-One run (the paper's "Synthesis Approach", DESIGN.md "Rewards and policies"):
+One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"):
 
 1. The landing-error GPs start empty (their prior alone sets wide intervals); the grid IMDP,
    the MT-PIMDP with the automaton of the scenario's formula and the reward, and the policies

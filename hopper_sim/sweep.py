@@ -467,7 +467,10 @@ def _init_worker() -> None:
     # Workers share the cores: one compute thread each (torch reads these when imported).
     for var in _THREAD_VARS:
         os.environ[var] = "1"
+    import signal
     import sys
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
 
     torch = sys.modules.get("torch")
     if torch is not None:
@@ -508,6 +511,11 @@ def _iter_process(
                 for fut in done:
                     task = pending.pop(fut)
                     yield task, fut.result()
+        except KeyboardInterrupt:
+            # stop the runs in progress now instead of waiting for them at shutdown
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            raise
         finally:
             for fut in pending:
                 fut.cancel()

@@ -2,7 +2,9 @@
 
 Every file is written atomically (a temporary file in the same folder, then ``os.replace``),
 so a reader sees either the previous file or the complete new one. Floats are written with
-``repr`` (they read back exactly); ``None`` is an empty field.
+``repr`` (they read back exactly); ``None`` is an empty field. Given a provenance record
+(:func:`hopper_sim.provenance.provenance`), the CSVs end with one column per field (the same
+value on every row) and the Markdown table with a line naming them.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from hopper_sim.events import OUTCOMES
+from hopper_sim.provenance import as_text
 from hopper_sim.sweep import (
     ROW_COLUMNS,
     CellSummary,
@@ -42,13 +45,15 @@ def _fmt_opt(value: object) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def rows_csv(rows: Iterable[SweepRow]) -> str:
-    """The raw rows as CSV text (header :data:`ROW_COLUMNS`; empty field for ``None``)."""
+def rows_csv(rows: Iterable[SweepRow], provenance: dict[str, Any] | None = None) -> str:
+    """The raw rows as CSV text (header :data:`ROW_COLUMNS`, then the ``provenance`` fields;
+    empty field for ``None``)."""
+    extra = as_text(provenance or {})
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(ROW_COLUMNS)
+    writer.writerow([*ROW_COLUMNS, *extra])
     for r in rows:
-        writer.writerow([_fmt_opt(getattr(r, name)) for name in ROW_COLUMNS])
+        writer.writerow([*(_fmt_opt(getattr(r, name)) for name in ROW_COLUMNS), *extra.values()])
     return buf.getvalue()
 
 
@@ -69,14 +74,16 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
 )
 
 
-def summary_csv(cells: Iterable[CellSummary]) -> str:
-    """Per-cell summaries as CSV text (header :data:`SUMMARY_COLUMNS`; CIs at the sweep's level)."""
+def summary_csv(cells: Iterable[CellSummary], provenance: dict[str, Any] | None = None) -> str:
+    """Per-cell summaries as CSV text (header :data:`SUMMARY_COLUMNS`, then the ``provenance``
+    fields; CIs at the sweep's level)."""
+    extra = as_text(provenance or {})
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(SUMMARY_COLUMNS)
+    writer.writerow([*SUMMARY_COLUMNS, *extra])
     for s in cells:
         rec = summary_record(s)
-        writer.writerow([_fmt_opt(rec[k]) for k in SUMMARY_COLUMNS])
+        writer.writerow([*(_fmt_opt(rec[k]) for k in SUMMARY_COLUMNS), *extra.values()])
     return buf.getvalue()
 
 
@@ -115,8 +122,9 @@ def _level_pct(result: SweepResult) -> int:
     return round(100 * (result.cells[0].reward.level if result.cells else 0.95))
 
 
-def markdown_table(result: SweepResult) -> str:
-    """Table I in Markdown: rows ``P_RL,ee = C``, columns ``eps``, then the paper's table.
+def markdown_table(result: SweepResult, provenance: dict[str, Any] | None = None) -> str:
+    """Table I in Markdown: rows ``P_RL,ee = C``, columns ``eps``, then the paper's table, then
+    a line with the ``provenance`` fields when given.
 
     An entry reads ``reward ± h / steps ± h (successes/runs)`` with ``h`` the half-width of
     the confidence interval.
@@ -139,6 +147,9 @@ def markdown_table(result: SweepResult) -> str:
             "",
             _markdown_table(_grid(result, _paper_entry)),
         ]
+    if provenance:
+        fields = "; ".join(f"{k} `{v}`" for k, v in as_text(provenance).items() if v)
+        parts += ["", f"Provenance: {fields}."]
     return "\n".join(parts) + "\n"
 
 
@@ -178,17 +189,20 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return path
 
 
-def write_outputs(result: SweepResult, out_dir: str | Path) -> dict[str, Path]:
-    """Write the raw rows CSV, the summary CSV and the Markdown table into ``out_dir``.
+def write_outputs(
+    result: SweepResult, out_dir: str | Path, provenance: dict[str, Any] | None = None
+) -> dict[str, Path]:
+    """Write the raw rows CSV, the summary CSV and the Markdown table into ``out_dir``, each
+    with the ``provenance`` fields when given.
 
     Returns:
         ``{"rows": ..., "summary": ..., "markdown": ...}``: the paths written.
     """
     out = Path(out_dir)
     return {
-        "rows": atomic_write_text(out / ROWS_FILE, rows_csv(result.rows)),
-        "summary": atomic_write_text(out / SUMMARY_FILE, summary_csv(result.cells)),
-        "markdown": atomic_write_text(out / MARKDOWN_FILE, markdown_table(result)),
+        "rows": atomic_write_text(out / ROWS_FILE, rows_csv(result.rows, provenance)),
+        "summary": atomic_write_text(out / SUMMARY_FILE, summary_csv(result.cells, provenance)),
+        "markdown": atomic_write_text(out / MARKDOWN_FILE, markdown_table(result, provenance)),
     }
 
 

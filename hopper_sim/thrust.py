@@ -15,7 +15,7 @@ I_hat = ldot_td^2 * pi * sqrt(m / k) / 4 (the integral of ldot^2 over half a lin
 stance that starts at touchdown with leg rate ldot_td), then c_2 = c_1 + (E_nom - E_1) / I_hat,
 then secant steps, at most ``max_runs`` simulated stances in all, stopping when
 |E - E_nom| <= rtol * E_nom, and clipped to the actuator's ctrlrange. It is an idealised energy
-regulator (it sees the hop's whole energy balance), as DESIGN.md asks of the thrust: it keeps
+regulator (it sees the hop's whole energy balance), as docs/design.md asks of the thrust: it keeps
 the interstitial speed at its nominal value hop after hop.
 """
 

@@ -1,6 +1,6 @@
 """Per-cell landing-error bounds and transition intervals of the grid abstraction.
 
-Conventions (``DESIGN.md``, :class:`planner.imdp.grid.GridWorld`): ``nx`` x ``ny`` cells of
+Conventions (``docs/design.md``, :class:`planner.imdp.grid.GridWorld`): ``nx`` x ``ny`` cells of
 side ``cell`` metres, origin at the lower-left corner; cell ``(i, j)`` covers
 ``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)``, flat index ``i * ny + j``; the absorbing
 ``out`` state has index ``nx * ny``. Actions, index 0..7: ``N1, N2, E1, E2, S1, S2, W1, W2``

@@ -1,6 +1,6 @@
 """One re-synthesis of the learning loop, run after every batch of hops (pure planning).
 
-Steps (DESIGN.md "Rewards and policies"), timed separately:
+Steps (docs/design.md "Rewards and policies"), timed separately:
 
 1. ``gp_fit``: refit the landing-error GPs on all data (warm-started).
 2. ``abstraction``: per-cell error bounds, transition intervals, the grid IMDP and the

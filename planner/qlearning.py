@@ -1,6 +1,6 @@
 """Robust Q-learning on interval MDPs with the minimising (state-ordering) adversary.
 
-Reward ``W`` is collected on *landing* (DESIGN.md), so for a row ``(s, a)`` with interval
+Reward ``W`` is collected on *landing* (docs/design.md), so for a row ``(s, a)`` with interval
 bounds ``l <= p <= u`` the robust Q-value is the worst case over the interval polytope::
 
     Q(s, a) = min_{l <= p <= u, sum p = 1}  sum_{s'} p(s') (W(s') + gamma V(s')),
@@ -25,6 +25,7 @@ product model, the grid cell of each product state), so that rewards are learned
 
 from __future__ import annotations
 
+import json
 import os
 import zipfile
 from collections.abc import Callable
@@ -236,6 +237,9 @@ class RobustQLearner:
         self.reward_sum = np.zeros(n_cells)
         self.reward_count = np.zeros(n_cells, dtype=np.int64)
         self._adv: OrderingAdversary | None = None
+        #: free-form JSON-able record saved with the table (e.g. the provenance of the
+        #: scenario it was learnt on); :meth:`load` restores it (``{}`` for older files).
+        self.metadata: dict = {}
 
     @property
     def n_states(self) -> int:
@@ -341,10 +345,12 @@ class RobustQLearner:
         return greedy_action(self.q[state], allowed)
 
     # ------------------------------------------------------------------ persistence
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write Q-table, learned rewards and settings to ``path`` (.npz) atomically."""
+    def save(self, path: str | os.PathLike[str], metadata: dict | None = None) -> None:
+        """Write Q-table, learned rewards, settings and ``metadata`` (default:
+        :attr:`metadata`; JSON-able) to ``path`` (.npz) atomically."""
         path = Path(path)
         s = self.settings
+        meta = self.metadata if metadata is None else metadata
         arrays = {
             "format": np.array(FORMAT_TAG),
             "version": np.array(FORMAT_VERSION),
@@ -353,6 +359,7 @@ class RobustQLearner:
             "reward_count": self.reward_count,
             "state_cell": self.state_cell,
             "settings": np.array([s.discount, s.learning_rate, s.epsilon, s.prior_reward]),
+            "metadata_json": np.array(json.dumps(meta)),
         }
         with atomic_write(path, fsync=True) as f:
             np.savez(f, **arrays)
@@ -396,4 +403,11 @@ class RobustQLearner:
         learner.q = q.copy()
         learner.reward_sum = rs.astype(np.float64)
         learner.reward_count = rc.astype(np.int64)
+        if "metadata_json" in arrays:
+            try:
+                learner.metadata = json.loads(str(arrays["metadata_json"]))
+            except ValueError as exc:
+                raise QTableError(f"{path}: field 'metadata_json' is not JSON ({exc})") from exc
+            if not isinstance(learner.metadata, dict):
+                raise QTableError(f"{path}: field 'metadata_json' must hold a JSON object")
         return learner

@@ -45,6 +45,7 @@ Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case stud
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import sys
@@ -364,13 +365,24 @@ class Scenario:
 
     def _check_formula(self) -> None:
         try:
-            check_propositions(self.formula, self.labels)
+            parsed = check_propositions(self.formula, self.labels)
         except UnknownPropositionError as err:
             raise UndefinedLabelError(str(err), key="formula") from err
         except LTLSyntaxError as err:
             raise ScenarioFormulaError(
                 f"formula {self.formula!r} does not parse: {err}", key="formula"
             ) from err
+        # A hazard or goal label that names no region and is not in the formula is a typo.
+        atoms = parsed.propositions()
+        for key, label in (("hazard", self.hazard), ("goal", self.goal)):
+            if label not in self.regions and label not in atoms:
+                close = difflib.get_close_matches(label, [*self.regions, *sorted(atoms)], n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                raise UndefinedLabelError(
+                    f"{key} label '{label}' names no region and does not occur in the "
+                    f"formula {self.formula!r}{hint}",
+                    key=key,
+                )
 
     @property
     def labels(self) -> tuple[str, ...]:

@@ -6,13 +6,12 @@ import argparse
 import sys
 import time
 
-from planner.errors import PlannerError
+from hopnav.errors import UsageError
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "automaton",
-        help="translate an LTL formula to a deterministic Rabin automaton (HOA on stdout)",
         description=(
             "Translate an LTL formula (Spot syntax) to a complete deterministic state-based "
             "Rabin automaton and print it as HOA v1 (default) or Graphviz DOT."
@@ -33,6 +32,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
     from planner.ltl.dot import to_dot
     from planner.ltl.hoa import to_hoa
     from planner.ltl.translate import translate
@@ -42,8 +42,7 @@ def run(args: argparse.Namespace) -> int:
         aut = translate(args.formula, args.ap)
         elapsed = time.perf_counter() - t0
     except PlannerError as err:
-        print(f"hopnav automaton: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     if args.stats:
         print(f"states: {aut.n_states}")
         print(f"pairs: {len(aut.pairs)}")

@@ -16,11 +16,8 @@ import math
 import sys
 from typing import Any, TextIO
 
-import numpy as np
-
-from hopper_sim.hop import HopInputError, simulate_hop
-from hopper_sim.model import HopperModel
-from hopper_sim.terrain import TerrainField
+from hopnav.arguments import non_negative_int
+from hopnav.errors import UsageError
 
 INVALID_INPUT = "invalid_input"
 
@@ -28,7 +25,6 @@ INVALID_INPUT = "invalid_input"
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "hop",
-        help="simulate one hop (or one per stdin line with --jsonl) and print the result",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -36,7 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vel", nargs=3, type=float, metavar=("VX", "VY", "VZ"))
     p.add_argument("--alpha", type=float, help="leg elevation at touchdown [rad]")
     p.add_argument("--beta", type=float, help="leg azimuth from the velocity heading [rad]")
-    p.add_argument("--perturb", type=int, metavar="SEED", help="terrain force field seed")
+    p.add_argument(
+        "--perturb", type=non_negative_int, metavar="SEED", help="terrain force field seed"
+    )
     p.add_argument("--noise", nargs=2, type=float, metavar=("NX", "NY"), help="nu [m]")
     p.add_argument("--thrust", action="store_true", help="regulate energy to the start energy")
     out = p.add_mutually_exclusive_group()
@@ -47,11 +45,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 class _Runner:
     def __init__(self) -> None:
+        from hopper_sim.model import HopperModel
+
         self.model = HopperModel.load()
         self.data = self.model.make_data()
-        self.terrains: dict[int, TerrainField] = {}
+        self.terrains: dict[int, Any] = {}
 
     def hop(self, case: dict[str, Any]) -> dict[str, Any]:
+        import numpy as np
+
+        from hopper_sim.hop import HopInputError, simulate_hop
+        from hopper_sim.terrain import TerrainField
+
         seed = case.get("perturb")
         terrain = None
         if seed is not None:
@@ -134,9 +139,14 @@ def _text(r: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hopper_sim.hop import HopInputError
+
+    missing = [n for n in ("vel", "alpha", "beta") if getattr(args, n) is None]
+    if missing and not args.jsonl:
+        raise UsageError(f"missing --{', --'.join(missing)} (or use --jsonl)")
     runner = _Runner()
     if args.jsonl:
-        status = 0
+        invalid: list[str] = []
         for lineno, line in enumerate(sys.stdin, start=1):
             if not line.strip():
                 continue
@@ -147,13 +157,13 @@ def run(args: argparse.Namespace) -> int:
                 result = runner.hop(case)
             except (json.JSONDecodeError, HopInputError) as exc:
                 result = _invalid(f"line {lineno}: {exc}")
-                status = 2
+                invalid.append(result["message"])
             _emit(result, sys.stdout)
-        return status
-    missing = [n for n in ("vel", "alpha", "beta") if getattr(args, n) is None]
-    if missing:
-        print(f"hopnav hop: missing --{', --'.join(missing)} (or use --jsonl)", file=sys.stderr)
-        return 2
+        if invalid:
+            raise UsageError(
+                f"{len(invalid)} invalid input line(s) on stdin, the first: {invalid[0]}"
+            )
+        return 0
     case: dict[str, Any] = {
         "pos": args.pos,
         "vel": args.vel,
@@ -169,9 +179,7 @@ def run(args: argparse.Namespace) -> int:
         result = _invalid(str(exc))
         if args.json:
             _emit(result, sys.stdout)
-        else:
-            print(f"hopnav hop: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     if args.json:
         _emit(result, sys.stdout)
     else:

@@ -14,7 +14,7 @@ bracket, through the project's automaton translation, product and exact game sol
 (:func:`planner.imdp.check.check_ltl`). JSON: ``{"initial": [...], "values": [...],
 "lower": [...], "upper": [...], "automaton_states": n}`` (``initial``: the values at the
 file's initial states). A formula that does not parse, or names a proposition that is not
-a label of the file, is an error (exit 2).
+a label of the file, is a usage error (exit 2).
 
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
@@ -22,7 +22,7 @@ model in another format (``--target`` names bmdp-tool's terminal states).
 ``hopnav imdp export --scenario NAME --out PATH [--to F]`` writes a scenario's MT-PIMDP: the
 grid abstraction with the transition intervals of the landing-error GP prior (no data yet, as
 at the start of a run; noise parameters from the MJCF), times the automaton of the scenario's
-formula, with the labels ``accept`` (robustly accepting end components) and ``fail``
+formula, with the labels ``accept`` (the almost-sure winning states) and ``fail``
 (failure states) added, so that Storm, PRISM or bmdp-tool can check it
 (``--target accept`` for bmdp-tool's terminal states).
 """
@@ -32,16 +32,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
-import numpy as np
+from hopnav.arguments import input_file, output_file, positive_float
+from hopnav.errors import UsageError
 
-from planner.errors import PlannerError
-from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
-from planner.imdp.io import FORMATS, TERMINAL, guess_format, read_model, write_model
+#: The model formats and the file suffix each is recognised by.
+FORMATS = ("prism", "drn", "bmdp")
+SUFFIXES = {".tra": "prism", ".drn": "drn", ".bmdp": "bmdp"}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("imdp", help="solve or convert interval MDP files")
+    p = subparsers.add_parser("imdp", description=__doc__)
     sub = p.add_subparsers(dest="imdp_command", metavar="ACTION", required=True)
 
     s = sub.add_parser("solve", help="robust reachability values of a model file")
@@ -51,23 +53,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--avoid", action="append", help="label to avoid (repeatable)")
     s.add_argument("--optimistic", action="store_true", help="best case instead of worst")
     s.add_argument("--minimize", action="store_true", help="minimise instead of maximise")
-    s.add_argument("--tolerance", type=float, default=1e-8)
+    s.add_argument("--tolerance", type=positive_float, default=1e-8)
     s.add_argument(
         "--uncertified",
         action="store_true",
         help="stop on the residual (no error bound) instead of the certified bracket",
     )
     s.add_argument("--json", action="store_true", help="print a JSON object")
-    s.set_defaults(func=run_solve)
+    s.set_defaults(func=run_solve, prog=s.prog)
 
     c = sub.add_parser("check", help="robust satisfaction of an LTL formula on a model file")
     c.add_argument("file")
     c.add_argument("--ltl", required=True, help="LTL formula over the file's labels")
     c.add_argument("--format", choices=FORMATS, help="default: from the file suffix")
     c.add_argument("--optimistic", action="store_true", help="best case instead of worst")
-    c.add_argument("--tolerance", type=float, default=1e-8)
+    c.add_argument("--tolerance", type=positive_float, default=1e-8)
     c.add_argument("--json", action="store_true", help="print a JSON object")
-    c.set_defaults(func=run_check)
+    c.set_defaults(func=run_check, prog=c.prog)
 
     e = sub.add_parser("export", help="write a model file, or a scenario's product, in a format")
     src = e.add_mutually_exclusive_group(required=True)
@@ -77,17 +79,39 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--format", choices=FORMATS, help="input format (default: suffix)")
     e.add_argument("--to", choices=FORMATS, help="output format (default: suffix)")
     e.add_argument("--target", action="append", help="bmdp: labels of the terminal states")
-    e.set_defaults(func=run_export)
+    e.set_defaults(func=run_export, prog=e.prog)
+
+
+def model_format(path: str, explicit: str | None, option: str) -> str:
+    """``explicit``, else the format of ``path``'s suffix (:data:`SUFFIXES`).
+
+    Raises:
+        UsageError: no format given and the suffix names none.
+    """
+    if explicit is not None:
+        return explicit
+    fmt = SUFFIXES.get(Path(path).suffix.lower())
+    if fmt is None:
+        known = ", ".join(f"{k} ({v})" for k, v in SUFFIXES.items())
+        raise UsageError(
+            f"{path}: cannot tell the model format from the suffix {Path(path).suffix!r} "
+            f"(known: {known}); give {option} {'|'.join(FORMATS)}"
+        )
+    return fmt
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
+    from planner.imdp.io import TERMINAL, read_model
+
+    fmt = model_format(args.file, args.format, "--format")
+    input_file(args.file, "model file")
+    target = args.target or ([TERMINAL] if fmt == "bmdp" else None)
+    if not target:
+        raise UsageError("--target LABEL is required (the states to reach)")
     try:
-        model = read_model(args.file, args.format)
-        fmt = args.format or guess_format(args.file)
-        target = args.target or ([TERMINAL] if fmt == "bmdp" else None)
-        if not target:
-            print("hopnav imdp solve: --target LABEL is required", file=sys.stderr)
-            return 2
+        model = read_model(args.file, fmt)
         spec = Specification(
             ReachAvoid(target, args.avoid),
             "optimistic" if args.optimistic else "pessimistic",
@@ -96,8 +120,7 @@ def run_solve(args: argparse.Namespace) -> int:
         alg = ValueIteration(tolerance=args.tolerance, certified=not args.uncertified)
         sol = solve(Problem(model, spec), alg)
     except PlannerError as err:
-        print(f"hopnav imdp solve: {err}", file=sys.stderr)
-        return 1
+        raise UsageError(str(err)) from None
     if args.json:
         out = {
             "values": sol.values.tolist(),
@@ -119,7 +142,7 @@ def run_solve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_bracket(values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
+def _print_bracket(values, lower, upper) -> None:
     """One line per state: ``state value lower upper``."""
     print("# state value lower upper", file=sys.stderr)
     for s, (v, lo, hi) in enumerate(zip(values, lower, upper, strict=True)):
@@ -127,18 +150,20 @@ def _print_bracket(values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> 
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.imdp import ValueIteration
     from planner.imdp.check import check_ltl
+    from planner.imdp.io import read_model
 
+    fmt = model_format(args.file, args.format, "--format")
+    input_file(args.file, "model file")
     try:
-        if not args.tolerance > 0:
-            raise PlannerError(f"--tolerance must be positive, got {args.tolerance}")
-        model = read_model(args.file, args.format)
+        model = read_model(args.file, fmt)
         result = check_ltl(
             model, args.ltl, args.optimistic, ValueIteration(tolerance=args.tolerance)
         )
     except PlannerError as err:
-        print(f"hopnav imdp check: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     if args.json:
         out = {
             "initial": result.values[result.initial].tolist(),
@@ -162,6 +187,8 @@ def run_check(args: argparse.Namespace) -> int:
 
 def scenario_product_model(name: str):
     """The labelled MT-PIMDP of scenario ``name`` under the GP prior (see the module doc)."""
+    import numpy as np
+
     from hopper_sim.model import HopperModel
     from planner.gp.landing import LandingErrorGP
     from planner.imdp.grid import GridWorld
@@ -182,18 +209,28 @@ def scenario_product_model(name: str):
 
 
 def run_export(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.imdp.io import read_model, write_model
+
+    to = model_format(args.out, args.to, "--to")
+    output_file(args.out, "--out")
+    if to == "prism":  # PRISM's explicit format is two files, the .tra and the .lab
+        output_file(Path(args.out).with_suffix(".lab"), "--out (its .lab file)")
+    if args.scenario is None:
+        fmt = model_format(args.file, args.format, "--format")
+        input_file(args.file, "model file")
     try:
         if args.scenario is not None:
             model = scenario_product_model(args.scenario)
         else:
-            model = read_model(args.file, args.format)
+            model = read_model(args.file, fmt)
         terminal = None
         if args.target:
             terminal = model.states_labelled(args.target[0])
             for name in args.target[1:]:
                 terminal |= model.states_labelled(name)
-        write_model(model, args.out, args.to, terminal=terminal)
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        write_model(model, args.out, to, terminal=terminal)
     except PlannerError as err:
-        print(f"hopnav imdp export: {err}", file=sys.stderr)
-        return 1
+        raise UsageError(str(err)) from None
     return 0

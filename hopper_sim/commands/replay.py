@@ -3,8 +3,10 @@
 The viewer opens when a display is available (``DISPLAY`` or ``WAYLAND_DISPLAY`` set) and the
 ``rerun`` viewer executable is found; otherwise (or with ``--summary``/``--json``) the command
 prints what the recording holds: entities, timelines, and per run the number of hops and the
-outcome. The file is always read and checked first, so a missing or corrupt file fails with a
-message and exit code 2 in both modes.
+outcome (runs are numbered from 1, as in the entity paths ``run_K``). Opening the file in the
+viewer shows the layout sent with it (one tab per run, see :mod:`hopper_sim.rerun_blueprint`).
+The file is always read and checked first, so a missing or corrupt file fails with a message
+and exit code 2 in both modes.
 """
 
 from __future__ import annotations
@@ -17,11 +19,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+from hopnav.errors import UsageError
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "replay",
-        help="open a .rrd recording in the rerun viewer, or print its summary headlessly",
         description=__doc__,
     )
     p.add_argument("file", help="the .rrd recording")
@@ -43,13 +46,13 @@ def viewer_command() -> list[str] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hopper_sim.recording import RecordingError, format_summary, summarize_recording
+    from hopper_sim.recording import RecordingError
+    from hopper_sim.recording_reader import format_summary, summarize_recording
 
     try:
         summary = summarize_recording(args.file)
     except RecordingError as err:
-        print(f"hopnav replay: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0

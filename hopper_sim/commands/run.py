@@ -2,9 +2,10 @@
 
 Runs a scenario (shipped ``a``-``d`` or a TOML path) for ``--runs`` consecutive runs (default:
 the scenario's; an unknown reward's Q-values and learned rewards carry over between runs while
-the GP data is reset), writes one rerun recording of the invocation and a PNG figure of the
-last run (default: under ``runs/``), shows a progress bar per run and prints a summary table
-(or, with ``--json``, one JSON object per run).
+the GP data is reset), writes one rerun recording of the invocation and a figure of the last
+finished run (PNG, SVG or PDF by the extension of ``--png``; default: under ``runs/``),
+shows a progress bar per run and prints a summary table (or, with ``--json``, one JSON object
+per run).
 """
 
 from __future__ import annotations
@@ -14,17 +15,21 @@ import json
 import sys
 from pathlib import Path
 
+from hopnav.arguments import figure_file, input_file, non_negative_int, output_file, positive_int
+from hopnav.errors import RunFailed, UsageError
+from hopnav.kernels import prepare_kernels
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "run",
-        help="run a case study (default: scenario a) with recording, figure and summary",
-        description=__doc__,
-    )
+    p = subparsers.add_parser("run", description=__doc__)
     p.add_argument("--scenario", default="a", help="shipped name (a, b, c, d) or TOML path")
-    p.add_argument("--runs", type=int, help="number of consecutive runs (default: scenario's)")
-    p.add_argument("--seed", type=int, help="seed of the first run (default: scenario's)")
-    p.add_argument("--max-steps", type=int, help="hop cap per run (default: scenario's)")
+    p.add_argument(
+        "--runs", type=positive_int, help="number of consecutive runs (default: scenario's)"
+    )
+    p.add_argument(
+        "--seed", type=non_negative_int, help="seed of the first run (default: scenario's)"
+    )
+    p.add_argument("--max-steps", type=positive_int, help="hop cap per run (default: scenario's)")
     p.add_argument(
         "--explore-to",
         choices=("accepting", "nonviolating"),
@@ -32,11 +37,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="end components exploration steers to (see RunnerSettings.candidates)",
     )
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
-    p.add_argument("--png", help="figure of the last run (default: runs/<scenario>.png)")
+    p.add_argument(
+        "--png", help="figure of the last run, .png/.svg/.pdf (default: runs/<scenario>.png)"
+    )
     p.add_argument("--no-rrd", action="store_true", help="write no recording")
     p.add_argument("--no-png", action="store_true", help="write no figure")
     p.add_argument(
-        "--q-table", help="load the Q-learner from this file if it exists, save it after"
+        "--q-table",
+        help="load the Q-learner from this file if it exists (it must be of the same "
+        "scenario), save it after",
+    )
+    p.add_argument(
+        "--checkpoint",
+        help="controller checkpoint (default: the shipped one; see hopnav train-controller)",
     )
     p.add_argument("--json", action="store_true", help="print a JSON list, one object per run")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -49,10 +62,12 @@ class _Progress:
     def __init__(self, total: int, n_runs: int, disable: bool) -> None:
         self.total, self.n_runs, self.disable = total, n_runs, disable
         self.bar = None
+        self._opening = False  # inside tqdm(): a Ctrl-C there leaves a drawn, unowned bar
 
     def on_run_start(self, event) -> None:
         from tqdm import tqdm
 
+        self._opening = True
         self.bar = tqdm(
             total=self.total,
             desc=f"run {event.run_index + 1}/{self.n_runs}",
@@ -61,6 +76,7 @@ class _Progress:
             file=sys.stderr,
             leave=True,
         )
+        self._opening = False
 
     def on_hop(self, event) -> None:
         if self.bar is not None:
@@ -79,7 +95,14 @@ class _Progress:
             self.bar = None
 
     def close(self) -> None:
-        pass
+        """Close the bar of a run that did not end (interrupted or failed), so that the
+        error line that follows starts a line of its own."""
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+        elif self._opening and not self.disable:
+            sys.stderr.write("\n")
+        self._opening = False
 
 
 def summary_table(ends) -> str:
@@ -126,85 +149,187 @@ def summary_table(ends) -> str:
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    from hopper_sim.events import Observers
-    from hopper_sim.figures import FigureWriter
-    from hopper_sim.recording import RerunRecorder
-    from hopper_sim.runner import NavigationRunner, RunnerSettings
+class _Finished:
+    """Observer keeping the :class:`~hopper_sim.events.RunEnd` of every finished run."""
+
+    def __init__(self) -> None:
+        self.ends: list = []
+        self.current: int | None = None
+
+    def on_run_start(self, event) -> None:
+        self.current = event.run_index
+
+    def on_hop(self, event) -> None:
+        pass
+
+    def on_synthesis(self, event) -> None:
+        pass
+
+    def on_run_end(self, event) -> None:
+        self.ends.append(event)
+        self.current = None
+
+
+def _load_learner(path: str, expected: dict):
+    """The Q-learner saved in ``path``, refused unless it was learnt on the same scenario."""
+    from hopper_sim.provenance import ProvenanceError, require_same_scenario
     from planner.errors import PlannerError
     from planner.qlearning import RobustQLearner
+
+    try:
+        learner = RobustQLearner.load(path)
+        require_same_scenario(learner.metadata.get("provenance"), expected, f"--q-table {path}")
+    except (PlannerError, ProvenanceError) as err:
+        raise UsageError(str(err)) from None
+    return learner
+
+
+def _controller(ckpt_path: Path):
+    """(model, controller) for the checkpoint ``ckpt_path``, checked against the MJCF."""
+    from hopper_sim.controller import LegAngleController, load_checkpoint
+    from hopper_sim.controller.errors import ControllerError
+    from hopper_sim.model import HopperModel
+
+    model = HopperModel.load()
+    try:
+        ckpt = load_checkpoint(ckpt_path, expected_param_hash=model.param_hash())
+        controller = LegAngleController.from_checkpoint(ckpt)
+    except ControllerError as err:
+        raise UsageError(f"--checkpoint: {err}") from None
+    return model, controller
+
+
+def _records(ends, files: dict, prov: dict) -> list[dict]:
+    return [
+        {
+            "outcome": e.outcome,
+            "reason": e.reason,
+            "steps": e.steps,
+            "reward": e.reward,
+            "switch_step": e.switch_step,
+            "p_switch": e.p_switch,
+            "left_plan_step": e.left_plan_step,
+            "backups": e.backups,
+            "seconds": e.seconds,
+            "timings": e.timings,
+            **files,
+            "provenance": prov,
+        }
+        for e in ends
+    ]
+
+
+def _report(args, sc, ends, files: dict, prov: dict) -> None:
+    if args.json:
+        print(json.dumps(_records(ends, files, prov), indent=2))
+        return
+    print(f"scenario {sc.name}: {sc.formula}, P_sat = {sc.p_sat}")
+    if ends:
+        print(summary_table(ends))
+    for key, path in files.items():
+        if path is not None:
+            print(f"{key}: {path}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
     from planner.scenario import load_scenario
 
     try:
         sc = load_scenario(args.scenario)
     except PlannerError as err:
-        print(f"hopnav run: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
+    stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
+    rrd = None if args.no_rrd else output_file(args.rrd or f"runs/{stem}.rrd", "--rrd", (".rrd",))
+    png = None if args.no_png else figure_file(args.png or f"runs/{stem}.png", "--png")
+    if args.q_table:
+        output_file(args.q_table, "--q-table")
+    from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
+    from hopper_sim.provenance import provenance
+
+    ckpt_path = input_file(args.checkpoint or DEFAULT_CHECKPOINT, "--checkpoint")
+    prov = provenance(sc, ckpt_path)  # of the scenario as loaded, before the overrides below
+    learner = None
+    if args.q_table and Path(args.q_table).exists():
+        learner = _load_learner(args.q_table, prov)
+
+    from hopper_sim.environment import HopperGridEnv
+    from hopper_sim.events import Observers
+    from hopper_sim.figures import FigureWriter
+    from hopper_sim.recording import RerunRecorder
+    from hopper_sim.runner import NavigationRunner, RunnerSettings
+
+    model, controller = _controller(ckpt_path)
     if args.max_steps is not None:
-        if args.max_steps < 1:
-            print(
-                f"hopnav run: --max-steps must be at least 1, got {args.max_steps}", file=sys.stderr
-            )
-            return 2
         sc = sc.with_runner(max_steps=args.max_steps)
     n_runs = sc.runner.runs if args.runs is None else args.runs
-    if n_runs < 1:
-        print(f"hopnav run: --runs must be at least 1, got {n_runs}", file=sys.stderr)
-        return 2
-    stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
-    rrd = None if args.no_rrd else Path(args.rrd or f"runs/{stem}.rrd")
-    png = None if args.no_png else Path(args.png or f"runs/{stem}.png")
+    settings = RunnerSettings(candidates=args.explore_to)
+    env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
+    try:
+        runner = NavigationRunner(sc, env=env, settings=settings, learner=learner)
+    except ValueError as err:  # e.g. a Q-table of another product size
+        raise UsageError(f"--q-table {args.q_table}: {err}") from None
+
+    prepare_kernels("hopnav run", quiet=args.quiet or args.json)
     for path in (rrd, png):
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-    learner = None
-    if args.q_table and Path(args.q_table).exists():
-        try:
-            learner = RobustQLearner.load(args.q_table)
-        except PlannerError as err:
-            print(f"hopnav run: {err}", file=sys.stderr)
-            return 2
-    observers = [_Progress(sc.runner.max_steps, n_runs, args.quiet or args.json)]
-    recorder = RerunRecorder(rrd) if rrd is not None else None
+    finished = _Finished()
+    progress = _Progress(sc.runner.max_steps, n_runs, args.quiet or args.json)
+    observers = [finished, progress]
+    recorder = RerunRecorder(rrd, provenance=prov) if rrd is not None else None
     if recorder is not None:
         observers.append(recorder)
+    writer = None
     if png is not None:
-        observers.append(FigureWriter(png))
-    fan = Observers(observers)
-    try:
-        settings = RunnerSettings(candidates=args.explore_to)
-        runner = NavigationRunner(sc, settings=settings, observer=fan, learner=learner)
-        ends = runner.run_many(n_runs, args.seed)
-    except BaseException:
-        if recorder is not None:
-            recorder.discard()
-        raise
-    fan.close()
-    if args.q_table and runner.learner is not None:
-        runner.learner.save(args.q_table)
+        writer = FigureWriter(png, n_runs=n_runs, metadata=prov)
+        observers.append(writer)
+    runner.observer = fan = Observers(observers)
     files = {"rrd": None if rrd is None else str(rrd), "png": None if png is None else str(png)}
-    if args.json:
-        out = [
-            {
-                "outcome": e.outcome,
-                "reason": e.reason,
-                "steps": e.steps,
-                "reward": e.reward,
-                "switch_step": e.switch_step,
-                "p_switch": e.p_switch,
-                "left_plan_step": e.left_plan_step,
-                "backups": e.backups,
-                "seconds": e.seconds,
-                "timings": e.timings,
-                **files,
-            }
-            for e in ends
-        ]
-        print(json.dumps(out, indent=2))
+    seed = sc.runner.seed if args.seed is None else args.seed
+    failure: str | None = None
+    try:
+        runner.run_many(n_runs, seed)
+    except KeyboardInterrupt:
+        failure = "interrupted"
+    except Exception as err:  # a failed run: keep what finished, then report it
+        failure = f"failed ({type(err).__name__}: {' '.join(str(err).split())})"
+    if failure is None:
+        fan.close()
     else:
-        print(f"scenario {sc.name}: {sc.formula}, P_sat = {sc.p_sat}")
-        print(summary_table(ends))
-        for key, path in files.items():
-            if path is not None:
-                print(f"{key}: {path}")
+        progress.close()
+        _keep_finished(finished, recorder, writer, files)
+    if args.q_table and runner.learner is not None:
+        runner.learner.save(args.q_table, metadata={"provenance": prov})
+    _report(args, sc, finished.ends, files, prov)
+    if failure is not None:
+        k = (finished.current if finished.current is not None else len(finished.ends)) + 1
+        kept = [p for p in files.values() if p is not None]
+        where = f" in {', '.join(kept)}" if kept and finished.ends else ""
+        raise RunFailed(
+            f"run {k} of {n_runs} {failure}; kept the {len(finished.ends)} finished run(s){where}"
+        )
     return 0
+
+
+def _keep_finished(finished: _Finished, recorder, writer, files: dict) -> None:
+    """After an interrupt or a failure: the recording keeps the finished runs (and the hops
+    of the one in progress) if any run finished, else it is discarded; the figure of the last
+    finished run is written (a fixed ``--png`` path is written on close). A second Ctrl-C does
+    not cut this short."""
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        if recorder is not None:
+            if finished.ends:
+                recorder.close()
+            else:
+                recorder.discard()
+                files["rrd"] = None
+        if writer is not None and finished.ends:
+            writer.close()
+        if not finished.ends:
+            files["png"] = None
+    finally:
+        signal.signal(signal.SIGINT, previous)

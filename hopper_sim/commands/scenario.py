@@ -1,8 +1,9 @@
 """``hopnav scenario NAME_OR_PATH``: validate a scenario file and show what it describes.
 
 Prints the scenario's settings and a text map of its grid (or, with ``--json``, the parsed
-settings as JSON); ``--png FILE`` also draws the empty world as a figure. A scenario with a
-problem fails with exit code 2 and the message names the key and the line.
+settings as JSON); ``--png FILE`` also draws the empty world as a figure (PNG, SVG or PDF by
+the file's extension, titled with the formula and P_sat, with the region legend). A scenario
+with a problem fails with exit code 2 and the message names the key and the line.
 """
 
 from __future__ import annotations
@@ -10,17 +11,19 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
+from pathlib import Path
+
+from hopnav.arguments import figure_file
+from hopnav.errors import UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "scenario",
-        help="validate a scenario (shipped name a-d or a TOML path) and print its map",
         description=__doc__,
     )
     p.add_argument("scenario", help="shipped name (a, b, c, d) or path to a scenario TOML")
-    p.add_argument("--png", help="also draw the world to this PNG file")
+    p.add_argument("--png", help="also draw the world to this figure (.png, .svg or .pdf)")
     p.add_argument("--json", action="store_true", help="print the settings as JSON")
     p.set_defaults(func=run)
 
@@ -32,8 +35,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         sc = load_scenario(args.scenario)
     except ScenarioError as err:
-        print(f"hopnav scenario: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
+    if args.png:
+        figure_file(args.png, "--png")
     if args.json:
         print(
             json.dumps(
@@ -66,10 +70,11 @@ def run(args: argparse.Namespace) -> int:
         print(ascii_map(sc))
     if args.png:
         from hopper_sim.figures import FigureError, render_run_figure
+        from hopper_sim.provenance import provenance
 
+        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
         try:
-            render_run_figure(sc, [], args.png)
+            render_run_figure(sc, [], args.png, metadata=provenance(sc))
         except FigureError as err:
-            print(f"hopnav scenario: {err}", file=sys.stderr)
-            return 2
+            raise UsageError(str(err)) from None
     return 0

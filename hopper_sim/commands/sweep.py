@@ -5,26 +5,32 @@ Runs ``--runs`` complete navigation runs for each cell of the grid
 (default: case study ``a``), in parallel worker processes (``--backend process``, the
 default), in this process (``serial``) or on a Ray cluster (``ray``, optional extra). Prints
 the table beside the paper's and writes ``sweep_runs.csv`` (one row per run),
-``sweep_summary.csv`` (per cell, 95 % Student-t intervals) and ``table_i.md`` to ``--out``.
+``sweep_summary.csv`` (per cell, 95 % Student-t intervals), ``table_i.md`` and the plot
+``table_i.png`` (reward and steps with their intervals against C and eps, the paper's values
+overlaid; :mod:`hopper_sim.sweep_plot`) to ``--out``.
 The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
 number of workers.
 
-``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted sweep
-leaves the runs it finished; ``--resume`` reuses them (same scenario file, checked through
-``sweep_meta.json``; a run is reused when its cell, run number and seed match) and runs the
-rest.
+``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted (or
+Ctrl-C'd) sweep leaves the runs it finished; ``--resume`` reuses them (same scenario, checked
+through the scenario digest of ``sweep_meta.json`` and of the rows; a run is reused when its
+cell, run number and seed match) and runs the rest. Every file carries the provenance of
+:mod:`hopper_sim.provenance` (CSV columns, ``sweep_meta.json``, a line under the Markdown
+table).
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from hopnav.arguments import non_negative_int, output_folder, positive_int
+from hopnav.errors import RunFailed, UsageError
+from hopnav.kernels import prepare_kernels
 
 META_FILE = "sweep_meta.json"
 
@@ -39,14 +45,15 @@ def _levels(text: str) -> tuple[float, ...]:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "sweep",
-        help="reproduce Table I: reward / steps over P_RL,ee = C x eps, with 95 %% CIs",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--scenario", default="a", help="shipped name (a-d) or TOML path [a]")
-    p.add_argument("--runs", type=int, default=10, help="runs per cell [10]")
-    p.add_argument("--seed", type=int, default=0, help="base seed of all runs [0]")
-    p.add_argument("--workers", type=int, default=None, help="parallel workers [number of cores]")
+    p.add_argument("--runs", type=positive_int, default=10, help="runs per cell [10]")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="base seed of all runs [0]")
+    p.add_argument(
+        "--workers", type=positive_int, default=None, help="parallel workers [number of cores]"
+    )
     p.add_argument(
         "--backend", choices=("process", "serial", "ray"), default="process", help="[process]"
     )
@@ -64,8 +71,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = output_folder(args.out, "--out")
     from tqdm import tqdm
 
+    from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
+    from hopper_sim.provenance import ProvenanceError, provenance
     from hopper_sim.sweep import (
         PAPER_CS,
         PAPER_EPSS,
@@ -86,19 +96,23 @@ def run(args: argparse.Namespace) -> int:
         write_outputs,
     )
     from planner.errors import ScenarioError
-    from planner.scenario import load_scenario, resolve_scenario_path
+    from planner.scenario import load_scenario
 
-    out = Path(args.out)
     try:
         scenario = load_scenario(args.scenario)
-        digest = hashlib.sha256(resolve_scenario_path(args.scenario).read_bytes()).hexdigest()
         spec = SweepSpec(
             cs=args.cs or PAPER_CS, epss=args.epss or PAPER_EPSS, runs=args.runs, seed=args.seed
         )
-        previous = _previous_rows(out, scenario.name, digest, read_rows_csv) if args.resume else []
-    except (ScenarioError, SweepError, SweepFileError) as err:
-        print(f"hopnav sweep: {err}", file=sys.stderr)
-        return 2
+        prov = provenance(scenario, DEFAULT_CHECKPOINT)  # the runs use the shipped controller
+        previous = _previous_rows(out, prov, read_rows_csv) if args.resume else []
+        if args.backend == "ray":
+            from hopper_sim.sweep import _import_ray
+
+            _import_ray()
+    except (ScenarioError, SweepError, SweepFileError, ProvenanceError, SweepBackendError) as err:
+        raise UsageError(str(err)) from None
+    if args.backend != "serial" or spec.n_runs > len(previous):
+        prepare_kernels("hopnav sweep", quiet=args.json)  # once, before the workers start
     order = {(t.c, t.eps, t.run, t.seed): t.index for t in spec.tasks()}
     finished: list[SweepRow] = [r for r in previous if (r.c, r.eps, r.run, r.seed) in order]
     bar = tqdm(total=spec.n_runs, unit="run", desc=f"sweep {scenario.name}", disable=args.json)
@@ -106,11 +120,11 @@ def run(args: argparse.Namespace) -> int:
     def progress(done: int, total: int, row: SweepRow) -> None:
         if done == 1:
             bar.update(spec.n_runs - total - bar.n)  # the reused runs
-            meta = {"scenario": scenario.name, "scenario_sha256": digest}
+            meta = {**prov, "provenance": prov}
             atomic_write_text(out / META_FILE, json.dumps(meta, indent=2) + "\n")
         finished.append(row)
         finished.sort(key=lambda r: order[(r.c, r.eps, r.run, r.seed)])
-        atomic_write_text(out / ROWS_FILE, rows_csv(finished))
+        atomic_write_text(out / ROWS_FILE, rows_csv(finished, prov))
         bar.update(1)
         bar.set_postfix_str(f"C={row.c:g} eps={row.eps:g} {row.outcome} {row.steps} hops")
 
@@ -125,18 +139,23 @@ def run(args: argparse.Namespace) -> int:
             previous=previous,
         )
     except (SweepBackendError, SweepError) as err:
-        print(f"hopnav sweep: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     except SweepRunError as err:
-        print(
-            f"hopnav sweep: {err}\nhopnav sweep: the {len(finished)} finished runs are in "
-            f"{out / ROWS_FILE}; after a fix, add --resume to run only the others",
-            file=sys.stderr,
-        )
-        return 1
+        raise RunFailed(
+            f"{err}; the {len(finished)} finished runs are in {out / ROWS_FILE}; after a fix, "
+            "add --resume to run only the others"
+        ) from None
+    except KeyboardInterrupt:
+        raise RunFailed(
+            f"interrupted; the {len(finished)} finished runs are in {out / ROWS_FILE}; add "
+            "--resume to run only the others"
+        ) from None
     finally:
         bar.close()
-    paths = write_outputs(result, args.out)
+    paths = write_outputs(result, args.out, prov)
+    from hopper_sim.sweep_plot import PLOT_FILE, write_table_plot
+
+    paths["plot"] = write_table_plot(result.cells, out / PLOT_FILE, metadata=prov)
     if args.json:
         record = result.to_json()
         record["files"] = {k: str(v) for k, v in paths.items()}
@@ -153,13 +172,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _previous_rows(
-    out: Path, name: str, digest: str, read_rows: Callable[[Path], list[Any]]
+    out: Path, prov: dict[str, Any], read_rows: Callable[[Path], list[Any]]
 ) -> list[Any]:
     """The finished rows in ``out`` for ``--resume``; empty if there are none.
 
     Raises:
-        SweepError: the rows in ``out`` belong to another scenario file.
+        SweepError: ``sweep_meta.json`` is missing or unreadable.
+        ProvenanceError: the meta file or a row belongs to another scenario.
     """
+    import csv
+
+    from hopper_sim.provenance import ProvenanceError, require_same_scenario
     from hopper_sim.sweep import SweepError
     from hopper_sim.sweep_files import ROWS_FILE
 
@@ -170,9 +193,12 @@ def _previous_rows(
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
         raise SweepError(f"cannot resume: {meta_path} is missing or unreadable ({err})") from err
-    if meta.get("scenario_sha256") != digest:
-        raise SweepError(
-            f"cannot resume: the runs in {out} are of scenario {meta.get('scenario')!r} from "
-            f"another scenario file than {name!r}; use another --out"
-        )
+    try:
+        require_same_scenario(meta, prov, f"{meta_path}")
+        with rows_path.open(encoding="utf-8", newline="") as fh:
+            digests = {row.get("scenario_sha256") for row in csv.DictReader(fh)}
+        for digest in digests - {prov["scenario_sha256"]}:
+            require_same_scenario({"scenario_sha256": digest}, prov, f"a row of {rows_path}")
+    except ProvenanceError as err:
+        raise ProvenanceError(f"cannot resume: {err} (or use another --out)") from None
     return read_rows(rows_path)

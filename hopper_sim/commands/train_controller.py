@@ -1,43 +1,103 @@
-"""``hopnav train-controller``: simulate hops, train the hop model, save the checkpoint."""
+"""``hopnav train-controller``: simulate hops, train the hop model, save the checkpoint.
+
+Reproduces the shipped controller checkpoint from a seed: samples interstitial states and
+touchdown angles, simulates them in MuJoCo (stance thrust regulated to the nominal speed),
+trains the MLP, computes the steady gait v_des and writes the checkpoint to ``--out``
+(default ``runs/controller.pt``; ``hopnav run --checkpoint FILE`` uses it). The shipped
+checkpoint is ``hopper_sim/data/controller.pt``, rebuilt with the defaults and
+``--out hopper_sim/data/controller.pt`` in a source checkout.
+
+A model whose held-out feasibility accuracy is below that of always answering the more common
+class is not written (exit code 1) unless ``--allow-weak`` is given.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
-from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
+from hopnav.arguments import (
+    at_least,
+    input_file,
+    non_negative_int,
+    output_file,
+    positive_float,
+    positive_int,
+)
+from hopnav.errors import RunFailed, UsageError
+
+#: Fewest hops to simulate: the held-out tenth must hold enough hops to measure the model.
+MIN_SAMPLES = 100
+DEFAULT_OUT = Path("runs") / "controller.pt"
+
+
+def _widths(text: str) -> tuple[int, ...]:
+    try:
+        widths = tuple(int(h) for h in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated layer widths such as 128,128, got {text!r}"
+        ) from None
+    if not widths or min(widths) < 1:
+        raise argparse.ArgumentTypeError(f"layer widths must be >= 1, got {text!r}")
+    return widths
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "train-controller",
-        help="generate hop data with MuJoCo, train the hop MLP, write the controller checkpoint",
-        description=(
-            "Reproduces the shipped controller checkpoint from a seed: samples interstitial "
-            "states and touchdown angles, simulates them (stance thrust regulated to the "
-            "nominal speed), trains the MLP, computes the steady gait v_des, saves."
-        ),
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--samples", type=int, default=60_000, help="hops to simulate")
-    p.add_argument("--seed", type=int, default=0, help="seed of sampling, split and training")
+    p.add_argument(
+        "--samples",
+        type=at_least(MIN_SAMPLES, "a tenth of them is held out to measure the model"),
+        default=60_000,
+        help="hops to simulate [60000]",
+    )
+    p.add_argument(
+        "--seed", type=non_negative_int, default=0, help="seed of sampling, split and training"
+    )
     p.add_argument("--data", type=Path, help="train on this saved dataset instead of simulating")
     p.add_argument("--save-data", type=Path, help="also save the simulated dataset (.npz)")
-    p.add_argument("--out", type=Path, default=DEFAULT_CHECKPOINT, help="checkpoint path")
-    p.add_argument("--epochs", type=int, default=120)
-    p.add_argument("--hidden", type=str, default="128,128,128", help="layer widths")
     p.add_argument(
-        "--nominal-speed", type=float, default=4.0, help="interstitial speed V_nom [m/s]"
+        "--out",
+        type=Path,
+        default=DEFAULT_OUT,
+        help=f"checkpoint to write [{DEFAULT_OUT}] (the shipped one is not replaced unless named)",
+    )
+    p.add_argument("--epochs", type=positive_int, default=120, help="[120]")
+    p.add_argument(
+        "--hidden", type=_widths, default=(128, 128, 128), help="layer widths [128,128,128]"
     )
     p.add_argument(
-        "--hop-length", type=float, default=2.0, help="hop length of the steady gait v_des [m]"
+        "--nominal-speed", type=positive_float, default=4.0, help="interstitial speed V_nom [m/s]"
     )
-    p.add_argument("--nthread", type=int, default=None, help="simulation threads")
-    p.add_argument("--torch-threads", type=int, default=1)
+    p.add_argument(
+        "--hop-length",
+        type=positive_float,
+        default=2.0,
+        help="hop length of the steady gait v_des [m]",
+    )
+    p.add_argument("--nthread", type=positive_int, default=None, help="simulation threads")
+    p.add_argument("--torch-threads", type=positive_int, default=1)
+    p.add_argument(
+        "--allow-weak",
+        action="store_true",
+        help="write the checkpoint even if its feasibility head is no better than chance",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    output_file(args.out, "--out", (".pt",))
+    if args.save_data is not None:
+        output_file(args.save_data, "--save-data", (".npz",))
+    if args.data is not None:
+        input_file(args.data, "--data")
+
     import torch
     from tqdm import tqdm
 
@@ -53,19 +113,22 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.controller.steady import steady_state
     from hopper_sim.controller.training import TrainConfig, train_hop_model
     from hopper_sim.model import HopperModel
+    from hopper_sim.provenance import provenance
 
     torch.set_num_threads(args.torch_threads)
     model = HopperModel.load()
     param_hash = model.param_hash()
     hop_fn = simulator_hop_fn(model, nominal_speed=args.nominal_speed, nthread=args.nthread)
     if args.data is not None:
-        dataset = load_dataset(args.data)
+        try:
+            dataset = load_dataset(args.data)
+        except ValueError as err:
+            raise UsageError(f"--data {args.data}: {err}") from None
         if dataset.metadata.get("param_hash") != param_hash:
-            print(
-                f"error: {args.data} was simulated with parameters "
+            raise UsageError(
+                f"--data {args.data}: simulated with hopper parameters "
                 f"{dataset.metadata.get('param_hash')}, the model has {param_hash}"
             )
-            return 2
         print(f"loaded {len(dataset)} hops from {args.data}")
     else:
         t0 = time.perf_counter()
@@ -85,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
             f"{dataset.ok.mean():.1%} successful"
         )
         if args.save_data is not None:
+            args.save_data.parent.mkdir(parents=True, exist_ok=True)
             print(f"saved dataset to {save_dataset(dataset, args.save_data)}")
 
     steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
@@ -92,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
         f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
     )
-    config = TrainConfig(hidden=tuple(int(h) for h in args.hidden.split(",")), epochs=args.epochs)
+    config = TrainConfig(hidden=args.hidden, epochs=args.epochs)
     t0 = time.perf_counter()
     with tqdm(total=config.epochs, desc="training", unit="epoch") as bar:
 
@@ -109,11 +173,25 @@ def run(args: argparse.Namespace) -> int:
     f = result.metrics["feasibility"]
     print(f"  feasibility accuracy {f['accuracy']:.4f}, failed hops called ok ", end="")
     print(f"{f['false_ok_rate']:.4f}")
+    held_out_ok = float(dataset.ok[result.test_index].mean())
+    chance = max(held_out_ok, 1.0 - held_out_ok)
+    if f["accuracy"] < chance:
+        message = (
+            f"the trained feasibility head is right on {f['accuracy']:.1%} of the "
+            f"{len(result.test_index)} held-out hops, below the {chance:.1%} of always answering "
+            "the more common class"
+        )
+        if not args.allow_weak:
+            raise RunFailed(
+                f"{message}; no checkpoint written (use more --samples or --epochs, or "
+                "--allow-weak)"
+            )
+        print(f"hopnav train-controller: warning: {message}", file=sys.stderr)
 
     metadata = {
         "command": (
             f"hopnav train-controller --samples {len(dataset)} --seed {args.seed} "
-            f"--epochs {args.epochs} --hidden {args.hidden} "
+            f"--epochs {args.epochs} --hidden {','.join(map(str, args.hidden))} "
             f"--nominal-speed {args.nominal_speed} --hop-length {args.hop_length}"
         ),
         "seed": args.seed,
@@ -123,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
         "train_config": {**config.__dict__, "hidden": list(config.hidden)},
         "dataset": {k: v for k, v in dataset.metadata.items() if k != "ranges"},
         "samples": len(dataset),
+        "provenance": provenance(None),
     }
     path = save_checkpoint(HopModelCheckpoint(result.net, param_hash, metadata), args.out)
     print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")

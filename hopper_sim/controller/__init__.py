@@ -1,4 +1,4 @@
-"""Learned hop model and leg-angle controller (issue 7).
+"""Learned hop model and leg-angle controller.
 
 Pipeline: :mod:`dataset` (simulated hops, failures labelled) -> :mod:`training`
 (:class:`~hop_model.HopNet`) -> :mod:`checkpoint` (validated, atomic) -> :mod:`optimizer`

@@ -21,6 +21,7 @@ import io
 import json
 import os
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,8 @@ from planner.atomic import atomic_write
 
 CHECKPOINT_FORMAT = "hopnav-hop-model"
 CHECKPOINT_VERSION = 1
-DEFAULT_CHECKPOINT = Path(__file__).resolve().parent.parent / "data" / "controller.pt"
+#: The shipped checkpoint (package data, ``hopper_sim/data/controller.pt``).
+DEFAULT_CHECKPOINT = Path(str(resources.files("hopper_sim") / "data" / "controller.pt"))
 
 
 @dataclass

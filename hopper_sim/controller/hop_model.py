@@ -1,6 +1,6 @@
 """The learned hop map: a torch MLP with built-in normalisation, in the heading frame.
 
-Symmetry (DESIGN.md, "Hopper"): the SLIP hop map is invariant to rotation about the vertical
+Symmetry (docs/design.md, "Hopper"): the SLIP hop map is invariant to rotation about the vertical
 axis once the touchdown azimuth ``beta`` is measured from the heading
 ``psi = atan2(v_y, v_x)`` of the horizontal interstitial velocity. The network therefore sees
 only

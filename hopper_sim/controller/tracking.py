@@ -1,7 +1,7 @@
 """Chained-hop tracking of random grid actions in MuJoCo (acceptance check of the controller).
 
 Each hop starts where the previous one ended (position and velocity of the interstitial
-state). Per hop a random action among the 8 of DESIGN.md (N1, N2, E1, E2, S1, S2, W1, W2) is
+state). Per hop a random action among the 8 of docs/design.md (N1, N2, E1, E2, S1, S2, W1, W2) is
 requested; the targets are the centres of the cells 1 or 2 cells away from the cell the
 hopper is in, on an unbounded 1 m grid (no world edge); all 8 actions are allowed, so the
 backup switch may execute another one. The landing error is

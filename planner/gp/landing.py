@@ -14,7 +14,7 @@ Priors (gpytorch priors on the hyperparameters, used as MAP penalties while fitt
 
 With no data the model is its prior: mean ``c = 0`` and std ``prior_std`` everywhere, so the
 intervals start wide. The default ``prior_std = 0.15`` m is about a third of the largest mean
-error DESIGN.md expects (0.3-0.5 m), so that ``beta * prior_std`` (about 0.74 m for the
+error docs/design.md expects (0.3-0.5 m), so that ``beta * prior_std`` (about 0.74 m for the
 15 x 15 world's ``beta = 4.9``) covers it.
 
 Every :meth:`LandingErrorGP.fit` re-initialises the ``eta`` inducing points by k-means

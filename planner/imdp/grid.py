@@ -1,4 +1,4 @@
-"""The grid abstraction of the world (DESIGN.md, "Abstraction").
+"""The grid abstraction of the world (docs/design.md, "Abstraction").
 
 The world is ``nx x ny`` cells of side ``cell`` metres with its origin at the lower-left
 corner; cell ``(i, j)`` covers ``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)`` and has flat

@@ -1,6 +1,6 @@
 """The multi-task product IMDP (MT-PIMDP) of an IMDP, a Rabin automaton and a reward.
 
-Per DESIGN.md the automaton reads the label of the state being *entered*: the product
+Per docs/design.md the automaton reads the label of the state being *entered*: the product
 transition ``(s, q) --a--> (s', q')`` has the interval of ``s --a--> s'`` and
 ``q' = delta(q, L(s'))``; the initial product state is ``(s0, delta(q0, L(s0)))``.
 Product state ``(s, q)`` has index ``s * n_q + q``. The reward ``W(s)`` of a model state

@@ -10,7 +10,7 @@ Properties:
   (the least fixed point, right also with end components and zero lower bounds); states
   whose value is 0 or 1 are found by graph analysis first and held fixed.
 * :class:`DiscountedReward`: ``V(s) = opt_a min/max_p sum_{s'} p(s') (W(s') + gamma V(s'))``:
-  the reward ``W`` is collected on *landing* in a state (DESIGN.md).
+  the reward ``W`` is collected on *landing* in a state (docs/design.md).
 
 ``satisfaction="pessimistic"``: the adversary opposes the strategy (the worst case);
 ``"optimistic"``: it helps.

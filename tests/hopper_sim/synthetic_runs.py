@@ -7,11 +7,17 @@ import numpy as np
 from hopper_sim.events import HopEvent, RunEnd, RunStart, SynthesisEvent
 from planner.scenario import Scenario
 
-PERIOD = 0.45  # s per hop, close to the steady SLIP gait
+PERIOD = 0.45  # s per hop, close to the steady SLIP gait (hop k lasts PERIOD + 0.01 k)
 
 
-def run_events(scenario: Scenario, run_index: int, n_hops: int, outcome: str = "success"):
-    """RunStart, an initial SynthesisEvent, ``n_hops`` eastward E2 hops and a RunEnd."""
+def run_events(
+    scenario: Scenario, run_index: int, n_hops: int, outcome: str = "success", samples: int = 21
+):
+    """RunStart, an initial SynthesisEvent, ``n_hops`` eastward E2 hops and a RunEnd.
+
+    As from the runner, a hop's times (``touchdown_time``, ``com_time``) count from its own
+    departure; hop ``k`` lasts ``PERIOD + 0.01 k`` s and has ``samples`` CoM samples.
+    """
     events: list = [RunStart(run_index, scenario, seed=100 + run_index)]
     w = scenario.world
     gx = np.linspace(0.5, w.width - 0.5, 5)
@@ -34,7 +40,7 @@ def run_events(scenario: Scenario, run_index: int, n_hops: int, outcome: str = "
     for step in range(n_hops):
         target = np.floor(pos / w.cell) * w.cell + 0.5 * w.cell + np.array([2.0 * w.cell, 0.0])
         landing = target + 0.05 * np.array([np.sin(step), np.cos(step)])
-        s = np.linspace(0.0, 1.0, 21)
+        s = np.linspace(0.0, 1.0, samples)
         xy = pos + s[:, None] * (landing - pos)
         z = 1.0 + 0.3 * np.abs(np.sin(np.pi * (2 * s - 0.5)))
         com = np.column_stack([xy, z])
@@ -57,13 +63,13 @@ def run_events(scenario: Scenario, run_index: int, n_hops: int, outcome: str = "
                 landing=landing,
                 com_path=com,
                 foot=foot,
-                touchdown_time=PERIOD * step + 0.2,
+                touchdown_time=0.2,
                 cell=cell,
                 product_state=cell,
                 p_worst=min(1.0, 0.4 + 0.1 * step),
                 reward=reward,
                 total_reward=total,
-                com_time=PERIOD * step + s * PERIOD,
+                com_time=s * (PERIOD + 0.01 * step),
             )
         )
         pos = landing
@@ -92,4 +98,4 @@ def feed(observer, events) -> None:
         RunEnd: observer.on_run_end,
     }
     for e in events:
-        handlers[type(e)](e)
+        handlers[next(t for t in handlers if isinstance(e, t))](e)

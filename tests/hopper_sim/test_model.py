@@ -1,4 +1,4 @@
-"""models/*.xml load, step without warnings, name every element; parameters read back."""
+"""hopper_sim/models/*.xml load, step without warnings, name every element; parameters read back."""
 
 from __future__ import annotations
 

@@ -28,14 +28,15 @@ def test_replay_prints_summary_headlessly(rrd, monkeypatch, capsys):
     assert replay.viewer_command() is None
     assert main(["replay", str(rrd)]) == 0
     out = capsys.readouterr().out
-    assert "run 0: 4 hops, outcome violation" in out
-    assert "run_0/hop/com_arc" in out and "world/cells/Haz" in out
+    assert "run 1: 4 hops, outcome violation" in out and "with blueprint" in out
+    assert "run_1/hop/com_arc" in out and "world/cells/Haz" in out
 
 
 def test_replay_json(rrd, capsys):
     assert main(["replay", "--json", str(rrd)]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["runs"][0]["hops"] == 4 and data["runs"][0]["outcome"] == "violation"
+    assert data["runs"][0]["run"] == 1 and data["blueprint"] is True
 
 
 def test_replay_bad_file_fails_with_message(tmp_path, capsys):

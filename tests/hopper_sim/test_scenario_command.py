@@ -20,7 +20,18 @@ def test_scenario_command_json_and_png(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["reward_known"] is False and data["runner"]["runs"] == 10
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert struct.unpack(">II", png.read_bytes()[16:24]) == (600, 600)
+    assert struct.unpack(">II", png.read_bytes()[16:24]) == (1600, 1120)  # 8 x 5.6 in, 200 dpi
+
+
+def test_scenario_command_writes_svg_and_pdf_by_extension(tmp_path, capsys):
+    svg, pdf = tmp_path / "world.svg", tmp_path / "world.pdf"
+    assert main(["scenario", "a", "--png", str(svg)]) == 0
+    assert main(["scenario", "a", "--png", str(pdf)]) == 0
+    assert svg.read_bytes().startswith(b"<?xml") and pdf.read_bytes().startswith(b"%PDF-")
+    capsys.readouterr()
+    assert main(["scenario", "a", "--png", str(tmp_path / "world.bmp")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown figure format '.bmp'" in err and len(err.strip().splitlines()) == 1
 
 
 def test_scenario_command_reports_key_and_line(tmp_path, capsys):

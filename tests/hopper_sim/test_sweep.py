@@ -374,8 +374,10 @@ def test_command_errors(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sw, "default_run_function", lambda: fake_run)
     assert hopnav(["sweep", "--scenario", str(tmp_path / "none.toml")]) == 2
     assert "no scenario" in capsys.readouterr().err
-    assert hopnav(["sweep", "--runs", "0", "--out", str(tmp_path)]) == 2
-    assert "runs must be" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # argparse rejects it, one line
+        hopnav(["sweep", "--runs", "0", "--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    assert "--runs: must be a whole number >= 1" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "ray", None)
     assert hopnav(["sweep", "--backend", "ray", "--out", str(tmp_path)]) == 2
     assert "hopnav[ray]" in capsys.readouterr().err
@@ -438,10 +440,21 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     fresh = json.loads(capsys.readouterr().out)
     assert resumed["rows"] == fresh["rows"] and resumed["cells"] == fresh["cells"]
 
+    # the digest is of the scenario, not of its file's bytes: a comment changes nothing ...
+    same = tmp_path / "same.toml"
+    same.write_text(resolve_scenario_path("a").read_text() + "\n# edited\n")
+    calls.clear()
+    assert hopnav([*args, "--resume", "--scenario", str(same)]) == 0
+    assert calls == [] and json.loads(capsys.readouterr().out)["rows"] == fresh["rows"]
+    # ... a changed value refuses the resume, naming both scenarios
     other = tmp_path / "other.toml"
-    other.write_text(resolve_scenario_path("a").read_text() + "\n# edited\n")
+    text = resolve_scenario_path("a").read_text()
+    assert "p_sat = 0.65" in text
+    other.write_text(text.replace("p_sat = 0.65", "p_sat = 0.7"))
     assert hopnav([*args, "--resume", "--scenario", str(other)]) == 2
-    assert "cannot resume" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "cannot resume" in err and "belongs to scenario 'a'" in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_default_run_function_needs_the_runner(monkeypatch):

@@ -66,7 +66,7 @@ def test_errors_go_to_stderr(model_file, capsys):
     _, path = model_file
     assert main(["imdp", "solve", str(path)]) == 2
     assert "--target" in capsys.readouterr().err
-    assert main(["imdp", "solve", str(path), "--target", "nope"]) == 1
+    assert main(["imdp", "solve", str(path), "--target", "nope"]) == 2  # bad input, as elsewhere
     assert "'nope'" in capsys.readouterr().err
 
 

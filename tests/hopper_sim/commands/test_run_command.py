@@ -3,7 +3,7 @@
 import json
 
 from hopper_sim.cli import main
-from hopper_sim.recording import summarize_recording
+from hopper_sim.recording_reader import summarize_recording
 
 LISTED = (
     "world/grid",
@@ -12,8 +12,9 @@ LISTED = (
     "run_{k}/hop/leg",
     "run_{k}/hop/target",
     "run_{k}/hops",
-    "run_{k}/gp/mean_x",
-    "run_{k}/gp/std_y",
+    "run_{k}/gp/mean",
+    "run_{k}/gp/image/std_y",
+    "run_{k}/route",
     "run_{k}/plots/p_worst",
     "run_{k}/plots/total_reward",
     "run_{k}/plots/phase",
@@ -33,9 +34,10 @@ def test_run_writes_consistent_recording_and_figure(tmp_path, capsys):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = summarize_recording(rrd)
     for k, r in enumerate(runs):
-        for name in LISTED:
-            assert name.format(k=k) in summary["entities"], name.format(k=k)
+        for name in LISTED:  # runs are numbered from 1
+            assert name.format(k=k + 1) in summary["entities"], name.format(k=k + 1)
         rec = summary["runs"][k]
+        assert rec["run"] == k + 1
         fell = r["reason"].startswith("hop failed")
         assert rec["hops"] == r["steps"] - fell
         assert rec["outcome"] == r["outcome"] and rec["steps"] == r["steps"]
@@ -44,7 +46,7 @@ def test_run_writes_consistent_recording_and_figure(tmp_path, capsys):
     # hopnav replay prints the summary headlessly
     assert main(["replay", str(rrd)]) == 0
     out = capsys.readouterr().out
-    assert "run_0/hop/com_arc" in out
+    assert "run_1/hop/com_arc" in out and "run 2:" in out and summary["blueprint"]
 
 
 def test_run_rejects_bad_scenario(tmp_path, capsys):

@@ -12,7 +12,7 @@ from hopper_sim.controller.steady import steady_state
 from .conftest import STANDIN_WEIGHTS
 from .standin import standin_hop
 
-# N1, N2, E1, E2, S1, S2, W1, W2 (DESIGN.md order)
+# N1, N2, E1, E2, S1, S2, W1, W2 (docs/design.md order)
 OFFSETS = np.array([[0, 1], [0, 2], [1, 0], [2, 0], [0, -1], [0, -2], [-1, 0], [-2, 0]], float)
 
 

@@ -1,9 +1,10 @@
-"""Cross-check against Storm (skipped when stormpy is not installed).
+"""Cross-check robust reachability against Storm (stormpy 2.0, a dev dependency).
 
-Storm 2.0 refuses reachability on interval models with a zero lower bound, so the model
-here has all lower bounds positive. Written against stormpy 2.0's documented interface
-(``build_interval_model_from_drn``, ``model_checking(..., uncertainty_resolution_mode=)``);
-it has not been run on this machine, where stormpy is not installed.
+Storm 2.0 refuses reachability on interval models with a zero lower bound ("requires
+graph-preservation"), so the model here has all lower bounds positive. The model goes through
+our DRN writer and Storm's own DRN parser (``build_model_from_drn[stormpy.Interval]``), then
+``model_checking(..., uncertainty_resolution_mode=ROBUST | COOPERATIVE)`` with Storm's robust
+value iteration to 1e-10.
 """
 
 import numpy as np
@@ -13,15 +14,18 @@ from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteratio
 from planner.imdp.io import write_drn
 from tests.planner.imdp.reference import random_imdp
 
-stormpy = pytest.importorskip("stormpy")
+stormpy = pytest.importorskip(
+    "stormpy",
+    reason="stormpy is not installed (it is a dev dependency: pip install -e '.[dev]'; its "
+    "wheel exists for CPython 3.11 on x86-64 Linux)",
+)
 
 
-@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
-def test_values_agree_with_storm(tmp_path, sat):
-    m = random_imdp(np.random.default_rng(41), n_states=30, zero_lower=False)
-    lower = np.maximum(m.lower, 1e-3)  # all lower bounds positive
+def _positive_lower_model(seed: int) -> IMDP:
+    m = random_imdp(np.random.default_rng(seed), n_states=30, zero_lower=False)
+    lower = np.maximum(m.lower, 1e-3)
     s, a, t, _, up = m.coo()
-    m = IMDP(
+    return IMDP(
         m.n_states,
         s,
         a,
@@ -32,22 +36,56 @@ def test_values_agree_with_storm(tmp_path, sat):
         labels=m.labels,
         propositions=m.propositions,
     )
+
+
+@pytest.mark.parametrize("seed", [41, 7])
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_values_agree_with_storm(tmp_path, sat, seed):
+    m = _positive_lower_model(seed)
     path = tmp_path / "m.drn"
     write_drn(m, path)
-    model = stormpy.build_interval_model_from_drn(str(path))
+    model = stormpy.build_model_from_drn[stormpy.Interval](str(path))
+    assert model.nr_states == m.n_states
     prop = stormpy.parse_properties('Pmax=? [!"bad" U "goal"]')[0]
     env = stormpy.Environment()
-    env.solver_environment.minmax_solver_environment.precision = stormpy.Rational(1e-10)
+    minmax = env.solver().min_max()
+    minmax.method = stormpy.environments.MinMaxMethod.VALUE_ITERATION
+    minmax.precision = stormpy.Rational(1e-10)
     mode = (
         stormpy.UncertaintyResolutionMode.ROBUST
         if sat == "pessimistic"
         else stormpy.UncertaintyResolutionMode.COOPERATIVE
     )
-    task = stormpy.CheckTask(prop.raw_formula, only_initial_states=False)
-    task.set_uncertainty_resolution_mode(mode)
-    result = stormpy.check_interval_mdp(model, task, env)
-    storm_values = np.array([result.at(i) for i in range(m.n_states)])
+    result = stormpy.model_checking(
+        model,
+        prop,
+        only_initial_states=False,
+        uncertainty_resolution_mode=mode,
+        environment=env,
+    )
+    storm_values = np.array([result.get_value(i) for i in range(m.n_states)])
     ours = solve(
         Problem(m, Specification(ReachAvoid("goal", "bad"), sat)), ValueIteration(1e-12)
     ).values
+    assert 0.0 < storm_values.max() and storm_values.min() < 1.0  # not a trivial model
     assert ours == pytest.approx(storm_values, abs=1e-8)
+
+
+def test_worst_case_is_below_best_case_in_storm(tmp_path):
+    """Storm's two resolution modes bracket each other (the modes are not swapped)."""
+    m = _positive_lower_model(41)
+    path = tmp_path / "m.drn"
+    write_drn(m, path)
+    model = stormpy.build_model_from_drn[stormpy.Interval](str(path))
+    prop = stormpy.parse_properties('Pmax=? [!"bad" U "goal"]')[0]
+    vals = {}
+    for mode in ("ROBUST", "COOPERATIVE"):
+        r = stormpy.model_checking(
+            model,
+            prop,
+            only_initial_states=False,
+            uncertainty_resolution_mode=getattr(stormpy.UncertaintyResolutionMode, mode),
+        )
+        vals[mode] = np.array([r.get_value(i) for i in range(m.n_states)])
+    assert (vals["ROBUST"] <= vals["COOPERATIVE"] + 1e-9).all()
+    assert (vals["ROBUST"] < vals["COOPERATIVE"] - 1e-3).any()
