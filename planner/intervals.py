@@ -184,6 +184,30 @@ def _window_bounds(
     return np.minimum(prob(e_lo), prob(e_hi)), prob(peak)
 
 
+def axis_bin_bounds(
+    noise: TruncatedGaussianNoise,
+    n: int,
+    cell: float,
+    target: np.ndarray,
+    e_lo: np.ndarray,
+    e_hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis landing bounds for the decoupled abstraction
+    (:mod:`planner.imdp.decoupled`): for rows aiming at ``target`` (shape ``(rows,)``,
+    metres) with the mean error in ``[e_lo, e_hi]``, the min and max over that interval of
+    the probability of landing in each of the ``n + 2`` bins *below* ``0``, the ``n``
+    columns ``[k cell, (k + 1) cell)``, and *above* ``n cell``. Shapes ``(rows, n + 2)``."""
+    t = np.asarray(target, dtype=np.float64)[:, None]
+    edges = np.concatenate(([-np.inf], np.arange(n + 1, dtype=np.float64) * cell, [np.inf]))
+    return _window_bounds(
+        noise,
+        edges[None, :-1] - t,
+        edges[None, 1:] - t,
+        np.asarray(e_lo, dtype=np.float64)[:, None],
+        np.asarray(e_hi, dtype=np.float64)[:, None],
+    )
+
+
 def transition_intervals(
     bounds: CellErrorBounds,
     grid: GridWorld,
