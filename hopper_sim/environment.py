@@ -18,9 +18,12 @@ regulates the energy to that of steady hopping.
 
 Observation: the interstitial state, ``{"pos": (2,) m, "vel": (3,) m/s, "cell": int}``, the
 cell a flat index ``i * ny + j`` (``nx * ny`` = off the map). Reward: the scenario's reward of
-the cell landed in (``W``, collected on landing). ``terminated`` when the hopper lands in a
-hazard cell or off the map, or a hop fails (the hopper fell: ``info["hop"].status`` says why);
-reaching the goal is the task's business (the automaton), not the environment's.
+the cell landed in (``W``), paid as the scenario's ``collect`` says: with ``"once"`` only on the
+episode's first landing in that cell, with ``"every"`` on every landing
+(:attr:`HopperGridEnv.collected` marks the cells landed in so far, ``info["first_landing"]``
+whether this landing was the episode's first in its cell). ``terminated`` when the hopper lands
+in a hazard cell or off the map, or a hop fails (the hopper fell: ``info["hop"].status`` says
+why); reaching the goal is the task's business (the automaton), not the environment's.
 """
 
 from __future__ import annotations
@@ -111,6 +114,8 @@ class HopperGridEnv:
         )
         self.reward_table = np.append(np.asarray(scenario.reward_grid, float).ravel(), 0.0)
         self.hazard_cells = self.grid.label_mask(scenario.hazard)
+        self.collected = np.zeros(self.grid.n_states, dtype=bool)
+        """Cells landed in during this episode (the start cell is not a landing)."""
         self._energy = nominal_energy(self.model, controller.steady.speed)
         self._data = self.model.make_data()
         self._rng: np.random.Generator | None = None
@@ -135,6 +140,7 @@ class HopperGridEnv:
             self._rng = np.random.default_rng(seed)
         self.pos = np.asarray(self.scenario.start, dtype=float).copy()
         self.vel = self.controller.steady.velocity.copy()
+        self.collected[:] = False
         self._done = False
         return self.observation(), {}
 
@@ -184,7 +190,10 @@ class HopperGridEnv:
         self.pos = np.asarray(hop.next_pos, dtype=float).copy()
         self.vel = np.asarray(hop.next_vel, dtype=float).copy()
         landed = self.cell
-        reward = float(self.reward_table[landed])
+        first = not self.collected[landed]
+        self.collected[landed] = True
+        paid = first or self.scenario.collect == "every"
+        reward = float(self.reward_table[landed]) if paid else 0.0
         hazard = bool(self.hazard_cells[landed])
         self._done = hazard
         info = StepInfo(decision, hop, start, target, self.pos - target)
@@ -193,5 +202,5 @@ class HopperGridEnv:
             reward,
             hazard,
             False,
-            {"step": info, "outcome": "hazard" if hazard else None},
+            {"step": info, "outcome": "hazard" if hazard else None, "first_landing": first},
         )

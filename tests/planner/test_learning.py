@@ -130,8 +130,9 @@ def test_exploration_candidates_setting():
                      initial_cell=9, settings=settings)  # fmt: skip
     assert r.mec is not None
     assert r.nonviolating.states[r.mec.component.states].all()
+    accepting = ResynthesisSettings(beta=3.0, candidates="accepting")
     r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                      initial_cell=9, settings=ResynthesisSettings(beta=3.0))  # fmt: skip
+                      initial_cell=9, settings=accepting)  # fmt: skip
     assert r2.mec is not None
     assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
     with pytest.raises(PolicyError, match="candidates"):
