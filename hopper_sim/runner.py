@@ -80,8 +80,10 @@ class RunnerSettings:
             until the guarantee exceeds P_sat; ``"accepting"`` (the goal-directed variant):
             the robustly accepting ones, so exploration heads for the goal while the RL
             action collects reward (runs then often reach the goal before any refit).
-        tour: the in-component tour's mode (``"coverage"`` or ``"reward"``, see
-            :mod:`planner.tour`).
+        tour: the in-component tour's mode: ``"reward"`` (default: the component's
+            rewarding cells first, then the rest) or ``"coverage"`` (least recently visited,
+            least known cells first; the reward is left to the RL action), see
+            :mod:`planner.tour`.
         torch_threads: torch intra-op threads during a run (the controller's and the GPs'
             small batches run fastest on one thread; restored after the run).
     """
@@ -93,7 +95,7 @@ class RunnerSettings:
     map_resolution: int = 2
     q_learning: QLearningSettings | None = None
     candidates: str = "nonviolating"
-    tour: str = "coverage"
+    tour: str = "reward"
     torch_threads: int = 1
 
 

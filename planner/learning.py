@@ -111,8 +111,10 @@ class ResynthesisSettings:
     (default: the pessimistic MECs of the nonviolating sub-model, as the paper defines
     exploration) or ``"accepting"`` (the goal-directed variant: the robustly accepting ones,
     falling back to the nonviolating MECs if there are none). ``tour``: the in-component
-    tour's mode (:data:`planner.tour.TOUR_MODES`: ``"coverage"`` heads for the least recently
-    visited cells, ``"reward"`` for the rewarding cells first).
+    tour's mode (:data:`planner.tour.TOUR_MODES`): ``"reward"`` (default) heads for the
+    component's cells of highest reward still to be collected, then tours the rest;
+    ``"coverage"`` only tours (least recently visited, least known cells first), leaving the
+    reward to the RL action.
     """
 
     samples_per_axis: int = 5
@@ -123,7 +125,7 @@ class ResynthesisSettings:
     discount: float = 0.95
     q_tolerance: float = 1e-6
     candidates: str = "nonviolating"
-    tour: str = "coverage"
+    tour: str = "reward"
 
     def __post_init__(self) -> None:
         if self.candidates not in CANDIDATES:
@@ -212,6 +214,23 @@ def fallback_strategy(
         pick = np.where(has_pref, optimistic, first_safe)
         best = np.where(rest, pick, best)
     return best
+
+
+def aimed_successors(product: ProductIMDP, grid: GridWorld) -> np.ndarray:
+    """``(n_rows,)`` the product state each row of ``product.model`` aims at: the cell its
+    hop is aimed at (``grid.target_cell``) with the automaton's step on entering it (-1 for
+    rows of states that are not grid cells)."""
+    pm = product.model
+    cell = product.base_state[pm.row_state]
+    q = product.automaton_state[pm.row_state]
+    is_cell = cell < grid.n_cells
+    target = np.full(pm.n_rows, -1, dtype=np.int64)
+    target[is_cell] = grid.target_cell[cell[is_cell], pm.row_action[is_cell]]
+    ok = target >= 0
+    aim = np.full(pm.n_rows, -1, dtype=np.int64)
+    q_next = product.automaton.transitions[q[ok], product.letters[target[ok]]]
+    aim[ok] = target[ok] * product.n_q + q_next
+    return aim
 
 
 def _remaining(w: np.ndarray, collected: np.ndarray | None, n: int) -> np.ndarray:
@@ -329,6 +348,7 @@ def resynthesise(
             product.reward,
             width[product.base_state],
             s.tour,
+            aim=aimed_successors(product, grid),
         )
     else:
         steer = product.goal_strategy(allowed=nonviolating.actions)

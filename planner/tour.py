@@ -4,20 +4,27 @@ Inside the chosen MEC ``(T, Act)`` of the nonviolating sub-model every action of
 the robot in ``T`` under every adversary of the IMDP, so safety leaves the choice among them
 free. A fixed choice (such as the component's lowest-index action) makes the robot shuttle
 between two cells, so the data it collects for the GPs, and the reward it meets, stay where
-it entered. The tour instead heads, at every decision, for the component's cells that this run
-has visited least recently (cells never visited first) and, among those, for the least known
-ones (largest ``uncertainty``, e.g. the width of a cell's landing-error interval), so
-exploration sweeps through the whole component, reaching first its frontier, where the data
-are thinnest and new data widen the safe region. With ``mode="reward"`` it heads for the
-component's cells of highest positive reward still to be collected first, and tours as above
-once there are none.
+it entered. The tour instead chooses targets afresh at every decision:
 
-The step towards the targets: ``d(s)``, the least number of hops from ``s`` to a target
-along the component's own edges (``upper > 0``, rows of ``Act``), and for each action of
-``Act`` in the current state the mean of ``d`` over its successors weighted by their upper
-bounds; the action of least mean wins, ties drawn from the run's generator. The current cell
-is never a target, so the tour always moves on. This is a heuristic for where to go, with no
-probability claim: the component being closed is what keeps it safe.
+* ``mode="reward"`` (default): the component's cells of highest positive reward still to be
+  collected (the robot heads for the rewarding cells that made the component the best
+  choice); once none is left, as ``"coverage"``.
+* ``mode="coverage"``: the component's cells that this run has visited least recently (cells
+  never visited first) and, among those, the least known ones (largest ``uncertainty``, e.g.
+  the width of a cell's landing-error interval), so exploration sweeps through the whole
+  component, reaching first its frontier, where the data are thinnest and new data widen the
+  safe region. (A tour that visits every state of the component equally often earns, in the
+  long run, the component's average reward, the quantity by which the paper chooses it.)
+
+The step towards the targets: every row (state, action) *aims* at one successor (``aim``:
+for the grid, the cell the hop is aimed at; where it is not given, the successor of largest
+upper bound). ``d(s)`` is the least number of aimed hops from ``s`` to a target through the
+component (rows of ``Act`` only), and the action of ``Act`` in the current state whose aimed
+successor has the least ``d`` wins, ties drawn from the run's generator. (Distances along all
+``upper > 0`` edges would not do: under learned intervals a hop has small-probability
+successors far to the side, and counting them as real moves sends the tour the wrong way.)
+The current cell is never a target, so the tour always moves on. This is a heuristic for
+where to go, with no probability claim: the component being closed is what keeps it safe.
 
 The tour depends on the run's history (when each cell was last visited), which the paper's
 control policies allow (maps from finite state sequences); :class:`planner.policy.SwitchingPolicy`
@@ -37,8 +44,9 @@ from planner.imdp import graph
 from planner.imdp.graph import EndComponent
 from planner.imdp.model import IMDP
 
-TOUR_MODES: tuple[str, ...] = ("coverage", "reward")
-"""``coverage``: least recently visited cells first; ``reward``: rewarding cells first."""
+TOUR_MODES: tuple[str, ...] = ("reward", "coverage")
+"""``reward``: rewarding cells first, then as ``coverage``; ``coverage``: least recently visited
+(then least known) cells first."""
 
 
 @dataclass(frozen=True)
@@ -54,7 +62,9 @@ class ComponentTour:
         reward: ``(n_states,)`` reward still to be collected per state (``mode="reward"``).
         uncertainty: ``(n_states,)`` how little is known where a state's cell is (larger: less
             known); among equally long unvisited cells the tour heads for the least known.
-        mode: ``"coverage"`` or ``"reward"`` (:data:`TOUR_MODES`).
+        mode: ``"reward"`` or ``"coverage"`` (:data:`TOUR_MODES`).
+        aim: ``(n_rows,)`` the successor each row aims at (-1, or a state that is not one of
+            the row's successors: the successor of largest upper bound); default: all -1.
     """
 
     model: IMDP
@@ -63,7 +73,8 @@ class ComponentTour:
     state_cell: np.ndarray
     reward: np.ndarray
     uncertainty: np.ndarray
-    mode: str = "coverage"
+    mode: str = "reward"
+    aim: np.ndarray | None = None
     _rows: np.ndarray = field(init=False, repr=False)
     _inside: np.ndarray = field(init=False, repr=False)
     _reverse: sp.csr_matrix = field(init=False, repr=False)
@@ -87,7 +98,28 @@ class ComponentTour:
         object.__setattr__(self, "uncertainty", unc)
         object.__setattr__(self, "_rows", rows)
         object.__setattr__(self, "_inside", inside)
-        object.__setattr__(self, "_reverse", graph.state_graph(m, rows).T.tocsr())
+        aim = self._aimed_successors(np.full(m.n_rows, -1) if self.aim is None else self.aim)
+        object.__setattr__(self, "aim", aim)
+        idx = np.flatnonzero(rows)
+        edges = sp.csr_matrix(
+            (np.ones(idx.size, dtype=np.int8), (aim[idx], m.row_state[idx])),
+            shape=(m.n_states, m.n_states),
+        )
+        object.__setattr__(self, "_reverse", edges)
+
+    def _aimed_successors(self, aim: np.ndarray) -> np.ndarray:
+        """``aim`` where it names a successor of its row, else the largest-upper successor."""
+        m = self.model
+        aim = np.asarray(aim, dtype=np.int64)
+        if aim.shape != (m.n_rows,):
+            raise PolicyError(f"aim must have shape ({m.n_rows},), got {aim.shape}")
+        hit = m.successor == aim[m.entry_row]
+        named = np.zeros(m.n_rows, dtype=bool)
+        named[m.entry_row[hit]] = True
+        # per row, the entry of largest upper bound (first of equals)
+        order = np.lexsort((-m.upper, m.entry_row))
+        first = order[np.searchsorted(m.entry_row[order], np.arange(m.n_rows))]
+        return np.where(named, aim, m.successor[first])
 
     def with_reward(self, reward: np.ndarray) -> ComponentTour:
         """The same tour with a new reward still to be collected (e.g. after a collection)."""
@@ -131,12 +163,7 @@ class ComponentTour:
             score = np.zeros(rows.size)
         else:
             dist = dijkstra(self._reverse, unweighted=True, indices=target, min_only=True)
-            dist = np.where(np.isfinite(dist), dist, float(m.n_states))
-            score = np.empty(rows.size)
-            for k, r in enumerate(rows):  # at most n_actions rows
-                e = slice(m.row_ptr[r], m.row_ptr[r + 1])
-                w = m.upper[e]
-                score[k] = float(w @ dist[m.successor[e]]) / max(float(w.sum()), 1e-300)
-        best = np.flatnonzero(score <= score.min() + 1e-12)
+            score = np.where(np.isfinite(dist), dist, float(m.n_states))[self.aim[rows]]
+        best = np.flatnonzero(score <= score.min())
         pick = best[0] if best.size == 1 else best[rng.integers(best.size)]
         return int(m.row_action[rows[pick]])

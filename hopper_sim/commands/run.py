@@ -10,6 +10,7 @@ last run (default: under ``runs/``), shows a progress bar per run and prints a s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -27,9 +28,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=int, help="hop cap per run (default: scenario's)")
     p.add_argument(
         "--explore-to",
-        choices=("accepting", "nonviolating"),
-        default="accepting",
+        choices=("nonviolating", "accepting"),
+        default="nonviolating",
         help="end components exploration steers to (see RunnerSettings.candidates)",
+    )
+    p.add_argument(
+        "--tour",
+        choices=("reward", "coverage"),
+        default="reward",
+        help="exploration inside the chosen component (see RunnerSettings.tour)",
     )
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
     p.add_argument("--png", help="figure of the last run (default: runs/<scenario>.png)")
@@ -91,6 +98,7 @@ def summary_table(ends) -> str:
         "reward",
         "switch",
         "p_switch",
+        "P after each synthesis",
         "left plan",
         "backups",
         "gp s",
@@ -110,6 +118,7 @@ def summary_table(ends) -> str:
                 f"{e.reward:.1f}",
                 "-" if e.switch_step is None else str(e.switch_step),
                 "-" if e.p_switch is None else f"{e.p_switch:.3f}",
+                " ".join(f"{p:.2f}" for p in e.p_worst_trace) or "-",
                 "-" if e.left_plan_step is None else str(e.left_plan_step),
                 str(e.backups),
                 f"{t.get('gp_fit', 0.0):.2f}",
@@ -172,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         observers.append(FigureWriter(png))
     fan = Observers(observers)
     try:
-        settings = RunnerSettings(candidates=args.explore_to)
+        settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
         runner = NavigationRunner(sc, settings=settings, observer=fan, learner=learner)
         ends = runner.run_many(n_runs, args.seed)
     except BaseException:
@@ -193,6 +202,8 @@ def run(args: argparse.Namespace) -> int:
                 "switch_step": e.switch_step,
                 "p_switch": e.p_switch,
                 "left_plan_step": e.left_plan_step,
+                "collections": e.collections,
+                "resyntheses": [dataclasses.asdict(r) for r in e.resyntheses],
                 "backups": e.backups,
                 "seconds": e.seconds,
                 "timings": e.timings,
