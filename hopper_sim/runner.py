@@ -70,6 +70,8 @@ class RunnerSettings:
         env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
         delta: the interval confidence parameter (intervals hold with probability >= 1 -
             delta under the GP model, see :mod:`planner.intervals`).
+        beta: the interval multiplier instead of the one ``delta`` gives (``None``: from
+            ``delta``); an override for studies of the guarantee, not a calibrated value.
         samples_per_axis: sample points per cell and axis for the per-cell error bounds.
         gp: GP fitting settings.
         map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
@@ -90,6 +92,7 @@ class RunnerSettings:
 
     env: EnvSettings = field(default_factory=EnvSettings)
     delta: float = 0.01
+    beta: float | None = None
     samples_per_axis: int = 5
     gp: FitSettings | None = None
     map_resolution: int = 2
@@ -144,6 +147,7 @@ class NavigationRunner:
         self.synthesis_settings = ResynthesisSettings(
             samples_per_axis=self.settings.samples_per_axis,
             delta=self.settings.delta,
+            beta=self.settings.beta,
             noise=TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
             p_sat=scenario.p_sat,
             discount=rp.discount,
