@@ -15,7 +15,7 @@ from planner.learning import (
     resynthesise,
 )
 from planner.policy import FALLBACK, GOAL_REACHING, SwitchingPolicy, SwitchingSettings
-from planner.qlearning import QLearningSettings, RobustQLearner
+from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
 from tests.planner.conftest import smooth_error
 from tests.planner.imdp.helpers import until_automaton
 
@@ -208,6 +208,7 @@ def test_collected_cells_are_worth_nothing_to_the_plan():
     q, rl, tour = replan_reward(r, reward=w, collected=done, settings=settings)
     np.testing.assert_allclose(q.values, 0.0, atol=1e-6)  # warm start from above
     assert tour is not None and not (tour.reward > 0).any()
+    assert isinstance(rl, GreedyQ) and np.array_equal(rl.q, np.nan_to_num(q.q, nan=-np.inf))
     same, _, _ = replan_reward(r, reward=w, settings=settings)
     np.testing.assert_allclose(same.values, r.q.values, atol=1e-6)
     r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
