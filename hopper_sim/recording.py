@@ -380,6 +380,13 @@ class RerunRecorder(Observer):
             rr.Arrows3D(origins=origins, vectors=vectors, colors=[(30, 90, 200)], radii=[0.01]),
         )
         rec.log(f"{base}/plots/p_worst_initial", rr.Scalars(float(event.p_worst_initial)))
+        if event.record is not None:  # the current state's P and the refit's hyperparameters
+            r = event.record
+            rec.log(f"{base}/plots/p_worst_current", rr.Scalars(float(r.p_worst_current)))
+            rec.log(
+                f"{base}/gp/hyperparameters",
+                rr.AnyValues(lengthscale=r.lengthscale, outputscale=r.outputscale, noise=r.noise),
+            )
         for stage, seconds in event.timings.items():
             rec.log(f"{base}/timings/{stage}", rr.Scalars(float(seconds)))
 
@@ -397,7 +404,8 @@ class RerunRecorder(Observer):
         rec.log(
             f"{base}/outcome",
             rr.TextDocument(
-                f"run {k}: {event.outcome} after {event.steps} hops, reward {event.reward:g}, "
+                f"run {k}: {event.outcome} ({event.reason or 'no reason given'}) after "
+                f"{event.steps} hops, reward {event.reward:g}, "
                 f"{switch}, {event.backups} backups, {event.seconds:.1f} s"
             ),
         )
