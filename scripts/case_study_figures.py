@@ -24,8 +24,8 @@ def main() -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for name in args.only:
-        code = hopnav(["run", "--scenario", name, "--no-rrd", "--quiet"]
-                      + ["--png", str(out / f"case_{name}.png")])  # fmt: skip
+        png = str(out / f"case_{name}.png")
+        code = hopnav(["run", "--scenario", name, "--no-rrd", "--quiet", "--png", png])
         if code:
             return code
     return 0
