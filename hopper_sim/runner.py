@@ -367,7 +367,7 @@ class NavigationRunner:
                     si.decision.executed,
                     nxt,
                     reward,
-                    allowed=res.nonviolating.actions,
+                    allowed=res.q_allowed,
                     learn_reward=first or not self.pays_once,
                 )
             total += reward

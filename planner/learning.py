@@ -25,8 +25,9 @@ Steps (DESIGN.md "Rewards and policies"), timed separately:
    strategy that merely maximises the best-case probability does not do this: under the prior
    that probability is 1 almost everywhere, every action ties, and the robot idles.) Then the
    satisfying sub-model for ``P_sat`` and its goal-reaching strategy; robust Q-values on the
-   nonviolating sub-model (known reward: :func:`robust_q_iteration`; unknown reward: the
-   learner's warm-started sweep on its learned rewards); a fallback plan for states without a
+   nonviolating sub-model, with nothing planned after the run's end (:func:`reward_actions`;
+   known reward: :func:`robust_q_iteration`; unknown reward: the learner's warm-started sweep
+   on its learned rewards); a fallback plan for states without a
    nonviolating action (:func:`fallback_strategy`): every enabled action allowed, the LTL
    action the safest way back.
 
@@ -154,6 +155,7 @@ class Resynthesis:
     exploration: PhasePlan
     goal: PhasePlan
     fallback: PhasePlan
+    q_allowed: np.ndarray
     q: QSolution
     rl: RLActor
     timings: dict[str, float]
@@ -231,6 +233,17 @@ def aimed_successors(product: ProductIMDP, grid: GridWorld) -> np.ndarray:
     q_next = product.automaton.transitions[q[ok], product.letters[target[ok]]]
     aim[ok] = target[ok] * product.n_q + q_next
     return aim
+
+
+def reward_actions(product: ProductIMDP, nonviolating: SubModel) -> np.ndarray:
+    """The actions the reward plan maximises over: those of the nonviolating sub-model, none in
+    product states whose automaton state is a sink (the run ends there, in success or
+    violation), so that ``V = 0`` there and no reward is planned after the end of a run.
+    (Without this the plan valued entering the goal by the rewards it could collect in the
+    accepting part of the product, and steered runs into the goal to "collect" them.)"""
+    table = product.automaton.transitions
+    sink = (table == np.arange(product.n_q)[:, None]).all(axis=1)
+    return nonviolating.actions & ~sink[product.automaton_state][:, None]
 
 
 def _remaining(w: np.ndarray, collected: np.ndarray | None, n: int) -> np.ndarray:
@@ -337,9 +350,12 @@ def resynthesise(
         if ((steer < 0) & ~inside).any():
             frontier = frontier_strategy(pm, inside, nonviolating.actions)
             steer = np.where((steer < 0) & ~inside, frontier, steer)
-        # a cell's uncertainty: the summed widths of its error intervals (0 for `out`)
+        # a cell's uncertainty: the summed widths of its error intervals (0 for `out`) and,
+        # for a learned reward, first of all whether its reward was ever observed
         gap = np.asarray(bounds.upper) - np.asarray(bounds.lower)
         width = np.append(gap.reshape(grid.n_cells, -1).sum(axis=1), 0.0)
+        if learner is not None:
+            width = width + (width.max() + 1.0) * (learner.reward_count == 0)
         tour = ComponentTour(
             pm,
             mec.component,
@@ -358,18 +374,19 @@ def resynthesise(
     satisfying = product.satisfying(s.p_sat, satisfaction)
     goal = product.goal_strategy(allowed=satisfying.actions)
     lap("goal_strategy")
+    q_allowed = reward_actions(product, nonviolating)
     if learner is None:
         q = robust_q_iteration(
             pm,
             product.reward,
             discount=s.discount,
-            allowed=nonviolating.actions,
+            allowed=q_allowed,
             initial=None if previous is None else previous.q.q,
             tolerance=s.q_tolerance,
         )
         rl: RLActor = GreedyQ(np.nan_to_num(q.q, nan=-np.inf))
     else:
-        q = learner.sweep(pm, allowed=nonviolating.actions, tolerance=s.q_tolerance)
+        q = learner.sweep(pm, allowed=q_allowed, tolerance=s.q_tolerance)
         rl = learner
     lap("q_values")
     t3 = clock()
@@ -387,6 +404,7 @@ def resynthesise(
         exploration=PhasePlan.masked(nonviolating.actions, steer),
         goal=PhasePlan.masked(satisfying.actions, goal),
         fallback=PhasePlan.masked(pm.enabled.copy(), best),
+        q_allowed=q_allowed,
         q=q,
         rl=rl,
         timings={"gp_fit": t1 - t0, "abstraction": t2 - t1, "synthesis": t3 - t2},
@@ -414,7 +432,7 @@ def replan_reward(
     s = settings or ResynthesisSettings()
     product = res.product
     pm = product.model
-    allowed = res.nonviolating.actions
+    allowed = res.q_allowed
     if reward is not None:
         w = _remaining(np.asarray(reward, dtype=np.float64), collected, product.base.n_states)
         q = robust_q_iteration(

@@ -12,9 +12,9 @@ so the values are lower bounds on the reward of every distribution inside the in
 * Known ``W``: :func:`robust_q_iteration` iterates the equations to a fixed point (a
   contraction with factor ``gamma``: error ``<= gamma / (1 - gamma) * residual``).
 * Unknown ``W``: :class:`RobustQLearner` learns the reward of a cell from visits (the mean of
-  the rewards observed on landing there; unvisited cells carry ``prior_reward``, by default
-  optimistic, so that greedy choices are drawn towards unexplored cells; where a cell pays only
-  on its first landing of a run the caller observes only those landings) and learns ``Q`` by
+  the rewards observed on landing there; unvisited cells carry ``prior_reward``, 0 by default;
+  where a cell pays only on its first landing of a run the caller observes only those
+  landings) and learns ``Q`` by
   asynchronous robust updates ``Q(s, a) <- (1 - alpha) Q(s, a) + alpha * target(s, a)`` on
   the visited rows (online, epsilon-greedy) plus full sweeps after each re-synthesis.
   ``Q`` and the learned rewards are saved and loaded (:meth:`RobustQLearner.save`,
@@ -219,14 +219,20 @@ class QLearningSettings:
 
     ``discount`` gamma; ``learning_rate`` alpha of the asynchronous update; ``epsilon`` the
     probability of a uniformly random allowed action in :meth:`RobustQLearner.act`;
-    ``prior_reward`` the reward assumed for unvisited cells (default 5: optimistic against the
-    case study's rewards 0, -0.5, 5, 20, neutral would be 0).
+    ``prior_reward`` the reward assumed for unvisited cells (default 0, neutral). An optimistic
+    prior (e.g. 5 against the case study's 0, -0.5, 5, 20) draws greedy choices towards
+    unexplored cells; under wide intervals, though, the robust Q-value of one rewarding cell is
+    0 while a patch of unexplored cells is worth the prior wherever the adversary sends the
+    robot, so it kept drawing later runs away from the cells learned to be worth 20 (case
+    (d)). The exploration of unknown rewards is left to the exploration tour
+    (:mod:`planner.learning` makes it head for cells whose reward was never observed first)
+    and to ``epsilon``.
     """
 
     discount: float = 0.95
     learning_rate: float = 0.5
     epsilon: float = 0.1
-    prior_reward: float = 5.0
+    prior_reward: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.discount < 1.0:
