@@ -217,3 +217,18 @@ def test_collected_cells_are_worth_nothing_to_the_plan():
     assert not (r2.product.reward > 0).any()
     with pytest.raises(PolicyError, match="collected"):
         replan_reward(r, reward=w, collected=done[:3])
+
+
+def test_no_reward_is_planned_after_the_run_ends():
+    # rewards reachable only after the goal (in the accepting part of the product) must not
+    # pull the plan into the goal: the run ends there
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=ResynthesisSettings(beta=0.5))  # fmt: skip
+    p = r.product
+    table = p.automaton.transitions
+    sink = (table == np.arange(p.n_q)[:, None]).all(axis=1)[p.automaton_state]
+    assert sink.any() and not r.q_allowed[sink].any()
+    np.testing.assert_allclose(r.q.values[sink], 0.0)
+    assert r.q.values[~sink].max() > 0
