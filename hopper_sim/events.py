@@ -140,10 +140,10 @@ class ResynthesisRecord:
             product state under this synthesis (the number the switch compares with P_sat).
         p_worst_initial: ``P̌`` of the initial product state.
         num_data: hops the GPs were fitted on.
-        lengthscale, outputscale, noise: the fitted GP hyperparameters, the x-error GP's
-            values then the y-error GP's: the RBF lengthscales (m, one per input axis), the
-            output scale ``s^2`` and the noise variance (m^2), as
-            :class:`~planner.gp.landing.FitReport` gives them.
+        gp: the landing-error model's report of this fit
+            (:class:`~planner.gp.landing.FitReport`): every numeric field but ``num_data``
+            (its hyperparameters and what it estimated), flattened to a tuple of floats;
+            a field with a non-finite value (e.g. the loss of a fit without data) is left out.
         mec_states: states of the end component exploration steers to (0: none).
         mec_probability: worst-case probability of reaching it from the current state.
         mec_average_reward: its average reward still to be collected.
@@ -153,9 +153,7 @@ class ResynthesisRecord:
     p_worst_current: float
     p_worst_initial: float
     num_data: int
-    lengthscale: tuple[float, ...] = ()
-    outputscale: tuple[float, ...] = ()
-    noise: tuple[float, ...] = ()
+    gp: dict[str, tuple[float, ...]] = field(default_factory=dict)
     mec_states: int = 0
     mec_probability: float | None = None
     mec_average_reward: float | None = None

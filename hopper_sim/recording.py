@@ -383,10 +383,7 @@ class RerunRecorder(Observer):
         if event.record is not None:  # the current state's P and the refit's hyperparameters
             r = event.record
             rec.log(f"{base}/plots/p_worst_current", rr.Scalars(float(r.p_worst_current)))
-            rec.log(
-                f"{base}/gp/hyperparameters",
-                rr.AnyValues(lengthscale=r.lengthscale, outputscale=r.outputscale, noise=r.noise),
-            )
+            rec.log(f"{base}/gp/hyperparameters", rr.AnyValues(**r.gp))
         for stage, seconds in event.timings.items():
             rec.log(f"{base}/timings/{stage}", rr.Scalars(float(seconds)))
 

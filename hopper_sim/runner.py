@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -240,18 +240,17 @@ class NavigationRunner:
     def _record(step: int, res: Resynthesis, current: int) -> ResynthesisRecord:
         fit, mec = res.fit, res.mec
         values = res.satisfaction.values
-
-        def floats(a: np.ndarray) -> tuple[float, ...]:
-            return tuple(float(v) for v in np.asarray(a, dtype=float).ravel())
-
+        gp = {}
+        for f in fields(fit):
+            value = np.asarray(getattr(fit, f.name))
+            if f.name != "num_data" and value.dtype.kind in "iuf" and np.isfinite(value).all():
+                gp[f.name] = tuple(float(v) for v in value.ravel())
         return ResynthesisRecord(
             step=step,
             p_worst_current=float(np.clip(values[current], 0.0, 1.0)),
             p_worst_initial=float(np.clip(values[res.product.initial], 0.0, 1.0)),
             num_data=int(fit.num_data),
-            lengthscale=floats(fit.lengthscale),
-            outputscale=floats(fit.outputscale),
-            noise=floats(fit.noise),
+            gp=gp,
             mec_states=0 if mec is None else len(mec.component),
             mec_probability=None if mec is None else float(mec.probability),
             mec_average_reward=None if mec is None else float(mec.average_reward),
