@@ -6,12 +6,16 @@ One run (the paper's "Synthesis Approach", DESIGN.md "Rewards and policies"):
    the MT-PIMDP with the automaton of the scenario's formula and the reward, and the policies
    are synthesised (:func:`planner.learning.resynthesise`).
 2. Every hop, the :class:`~planner.policy.SwitchingPolicy` picks an action in the current
-   product state (exploration towards the chosen MEC or goal reaching, LTL or RL, only among
-   the allowed actions of the nonviolating or satisfying sub-model); the environment
+   product state (exploration: towards the chosen MEC and through it, see
+   :mod:`planner.tour`; or goal reaching; LTL or RL, only among the allowed actions of the
+   nonviolating or satisfying sub-model); the environment
    (:class:`~hopper_sim.environment.HopperGridEnv`) turns it into touchdown angles (with the
    controller's backup switch among the same allowed actions) and hops in MuJoCo with the
    terrain field, noise and thrust; the departure position and the landing error
-   ``landing - target`` are recorded; the automaton reads the label of the cell landed in.
+   ``landing - target`` are recorded; the automaton reads the label of the cell landed in;
+   the reward is paid as the scenario's ``collect`` says. Where cells pay once, a first
+   landing in a cell with a (known or believed) nonzero reward re-solves the reward plan with
+   that cell at 0 (:func:`planner.learning.replan_reward`, timed as ``replan``).
 3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
    abstraction and policies re-synthesised. After the switch to goal reaching the data are
    still recorded and the model re-synthesised, but the goal-reaching plan of the switch is
