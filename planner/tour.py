@@ -61,7 +61,8 @@ class ComponentTour:
         state_cell: ``(n_states,)`` the cell of each state (the tour's targets are cells).
         reward: ``(n_states,)`` reward still to be collected per state (``mode="reward"``).
         uncertainty: ``(n_states,)`` how little is known where a state's cell is (larger: less
-            known); among equally long unvisited cells the tour heads for the least known.
+            known); among the cells unvisited for equally long the tour heads for the least
+            known.
         mode: ``"reward"`` or ``"coverage"`` (:data:`TOUR_MODES`).
         aim: ``(n_rows,)`` the successor each row aims at (-1, or a state that is not one of
             the row's successors: the successor of largest upper bound); default: all -1.
