@@ -75,7 +75,9 @@ def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
                 current_state=ps, settings=settings, previous=r,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
-            policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl)
+            policy.resynthesise(
+                r.exploration, r.goal, r.satisfaction.values, r.fallback, r.rl, tour=r.tour
+            )
             timings.append(r.timings | {"detail": r.synthesis_detail})
         d = policy.decide(ps, rng)
         phases[d.phase] = phases.get(d.phase, 0) + 1
@@ -109,7 +111,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--runs", type=int, default=1, help="seeds seed .. seed + runs - 1")
     ap.add_argument("--beta", type=float, default=None, help="default: union bound, delta 0.01")
-    ap.add_argument("--candidates", choices=("accepting", "nonviolating"), default="accepting")
+    ap.add_argument("--candidates", choices=("nonviolating", "accepting"), default="nonviolating")
     ap.add_argument("--batch", type=int, default=50)
     ap.add_argument("--cap", type=int, default=500)
     ap.add_argument("--verbose", action="store_true", help="print every batch's timings")
