@@ -11,8 +11,11 @@ One run (the paper's "Synthesis Approach", DESIGN.md "Rewards and policies"):
    (:class:`~hopper_sim.environment.HopperGridEnv`) turns it into touchdown angles (with the
    controller's backup switch among the same allowed actions) and hops in MuJoCo with the
    terrain field, noise and thrust; the departure position and the landing error
-   ``landing - target`` are recorded; the automaton reads the label of the cell landed in.
-3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
+   ``landing - target`` (relative to the executed action's target) and the executed action
+   are recorded for the landing-error model; the automaton reads the label of the cell
+   landed in.
+3. After every ``batch_size`` hops the landing-error model (its prior derived from the
+   scene, :func:`hopper_sim.error_prior.error_prior`) is refitted on all data of the run and the
    abstraction and policies re-synthesised. After the switch to goal reaching the data are
    still recorded and the model re-synthesised, but the goal-reaching plan of the switch is
    kept (:class:`~planner.policy.SwitchingPolicy`, ``keep_goal_plan``): the reported
@@ -42,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.error_prior import error_prior
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
 from planner.automaton import RabinAutomaton
 from planner.gp.landing import FitSettings, LandingErrorGP
@@ -64,7 +68,8 @@ class RunnerSettings:
         delta: the interval confidence parameter (intervals hold with probability >= 1 -
             delta under the GP model, see :mod:`planner.intervals`).
         samples_per_axis: sample points per cell and axis for the per-cell error bounds.
-        gp: GP fitting settings.
+        gp: the landing-error model's prior (default: derived from the scene and the
+            controller, :func:`hopper_sim.error_prior.error_prior`).
         map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
         q_learning: online Q-learning settings for an unknown reward (its discount is the
             scenario's).
@@ -75,7 +80,7 @@ class RunnerSettings:
             reward is highest. Measured on case (a): with ``"nonviolating"`` runs often time
             out cycling through the A cells (the robust Q-values there dwarf the pull of the
             goal), so ``"accepting"`` is the default.
-        torch_threads: torch intra-op threads during a run (the controller's and the GPs'
+        torch_threads: torch intra-op threads during a run (the controller's
             small batches run fastest on one thread; restored after the run).
     """
 
@@ -167,9 +172,12 @@ class NavigationRunner:
                     prior_reward=qs.prior_reward,
                 ),
             )
-        # torch/gpytorch start-up costs (seconds, once per process) out of the batch timings
-        with torch_threads(self.settings.torch_threads):
-            LandingErrorGP(self.settings.gp).warm_up()
+        self.gp_settings = self.settings.gp or error_prior(
+            self.env.model,
+            self.env.controller,
+            terrain=self.env.settings.terrain,
+            cell=scenario.world.cell,
+        )
         res = self.settings.map_resolution
         w = scenario.world
         self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
@@ -181,6 +189,7 @@ class NavigationRunner:
         gp: LandingErrorGP,
         positions: list[np.ndarray],
         errors: list[np.ndarray],
+        actions: list[int],
         current: int | None,
         previous: Resynthesis | None = None,
     ) -> Resynthesis:
@@ -192,6 +201,7 @@ class NavigationRunner:
             self.automaton,
             pos,
             err,
+            actions=np.asarray(actions, dtype=np.int64),
             reward=self.env.reward_table if self.learner is None else None,
             learner=self.learner,
             initial_cell=self.scenario.start_cell,
@@ -206,6 +216,8 @@ class NavigationRunner:
     ) -> SynthesisEvent:
         gx, gy = np.meshgrid(self.map_x, self.map_y, indexing="ij")
         mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
+        # the map shows, per point, the mean over the actions and the largest std
+        mean, std = mean.mean(axis=1), std.max(axis=1)
         shape = (*gx.shape, 2)
         return SynthesisEvent(
             run_index=run_index,
@@ -226,13 +238,15 @@ class NavigationRunner:
 
     def _run(self, seed: int, run_index: int) -> RunEnd:
         t_start = self.clock()
-        env_seed, policy_seed, gp_seed = np.random.SeedSequence(seed).generate_state(3)
+        # the third word seeded the old GP's k-means; kept so that a seed's draws stay the same
+        env_seed, policy_seed, _ = np.random.SeedSequence(seed).generate_state(3)
         rng = np.random.default_rng(policy_seed)
         self.observer.on_run_start(RunStart(run_index, self.scenario, int(seed)))
         obs, _ = self.env.reset(seed=int(env_seed))
-        gp = LandingErrorGP(self.settings.gp, seed=int(gp_seed))
+        gp = LandingErrorGP(self.gp_settings)
         positions: list[np.ndarray] = []
         errors: list[np.ndarray] = []
+        actions: list[int] = []
         timings = {"gp_fit": 0.0, "abstraction": 0.0, "synthesis": 0.0, "hops": 0.0}
         batch_max = 0.0
 
@@ -246,7 +260,7 @@ class NavigationRunner:
             )
             self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res))
 
-        res = self._synthesise(gp, positions, errors, None)
+        res = self._synthesise(gp, positions, errors, actions, None)
         product = res.product
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
@@ -274,6 +288,7 @@ class NavigationRunner:
                 break
             positions.append(si.start_pos)
             errors.append(si.error)
+            actions.append(int(si.decision.executed))
             landed = int(obs["cell"])
             nxt = product.step(pstate, landed)
             if self.learner is not None:
@@ -320,7 +335,7 @@ class NavigationRunner:
             elif self.accepting_sink[q]:
                 outcome, reason = "success", "specification satisfied"
             elif steps % rp.batch_size == 0:
-                res = self._synthesise(gp, positions, errors, pstate, res)
+                res = self._synthesise(gp, positions, errors, actions, pstate, res)
                 product = res.product
                 install(res, steps)
         timings["batch_max"] = batch_max
