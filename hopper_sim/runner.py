@@ -65,8 +65,9 @@ class RunnerSettings:
 
     Attributes:
         env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
-        delta: the interval confidence parameter (intervals hold with probability >= 1 -
-            delta under the GP model, see :mod:`planner.intervals`).
+        delta: the interval confidence parameter (a run of up to 100 hops after the switch
+            keeps its hops' errors inside their intervals with probability >= 1 - delta under
+            the landing-error model, see :mod:`planner.intervals`).
         samples_per_axis: sample points per cell and axis for the per-cell error bounds.
         gp: the landing-error model's prior (default: derived from the scene and the
             controller, :func:`hopper_sim.error_prior.error_prior`).
@@ -86,7 +87,7 @@ class RunnerSettings:
 
     env: EnvSettings = field(default_factory=EnvSettings)
     delta: float = 0.01
-    samples_per_axis: int = 5
+    samples_per_axis: int = 3
     gp: FitSettings | None = None
     map_resolution: int = 2
     q_learning: QLearningSettings | None = None

@@ -99,7 +99,7 @@ class ResynthesisSettings:
     literal reading).
     """
 
-    samples_per_axis: int = 5
+    samples_per_axis: int = 3
     delta: float = 0.01
     horizon: int = 100
     beta: float | None = None

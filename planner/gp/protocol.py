@@ -13,12 +13,13 @@ class ErrorPredictor(Protocol):
     position ``x`` (metres) and the executed action ``a`` (``0 .. n_actions - 1``).
 
     ``predict`` returns the posterior mean and standard deviation of ``e`` per action and
-    axis. ``variation`` bounds how much they can change between two points whose coordinates
-    differ by at most ``half_width`` (per axis, metres): for all such ``x, x'``, each action
-    ``a`` and axis ``d``, ``|mean(x, a, d) - mean(x', a, d)| <= dmean[a, d]`` and the same
-    for the std with ``dstd``. It is what turns a finite set of samples into a bound over a
-    whole cell. ``residual_std`` is the std of the hop-to-hop error beyond the known landing
-    noise (what the departure position and action do not explain), per action and axis.
+    axis. ``variation`` bounds how much they can change near given points: for every point
+    ``p = points[m]``, every ``x`` with ``|x_i - p_i| <= half_width[i]``, each action ``a``
+    and axis ``d``, ``|mean(x, a, d) - mean(p, a, d)| <= dmean[m, a, d]`` and
+    ``|std(x, a, d) - std(p, a, d)| <= dstd[a, d]``. It is what turns a finite set of samples
+    into a bound over a whole cell. ``residual_std`` is the std of the hop-to-hop error beyond
+    the known landing noise (what the departure position and action do not explain), per
+    action and axis.
     """
 
     n_actions: int
@@ -27,8 +28,11 @@ class ErrorPredictor(Protocol):
         """``points`` (M, 2) -> ``(mean (M, n_actions, 2), std (M, n_actions, 2))``, metres."""
         ...
 
-    def variation(self, half_width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``half_width`` (2,) -> ``(dmean (n_actions, 2), dstd (n_actions, 2))``, metres."""
+    def variation(
+        self, points: np.ndarray, half_width: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``points`` (M, 2), ``half_width`` (2,) -> ``(dmean (M, n_actions, 2),
+        dstd (n_actions, 2))``, metres."""
         ...
 
     def residual_std(self) -> np.ndarray:

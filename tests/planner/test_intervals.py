@@ -224,8 +224,8 @@ class _Predictor:
         std = np.full((m, NA, 2), self.std_value)
         return mean, std
 
-    def variation(self, half_width):
-        return np.zeros((NA, 2)), np.full((NA, 2), self.dstd)
+    def variation(self, points, half_width):
+        return np.zeros((len(points), NA, 2)), np.full((NA, 2), self.dstd)
 
     def residual_std(self):
         return np.zeros((NA, 2)) if self.residual is None else self.residual

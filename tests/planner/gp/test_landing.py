@@ -44,9 +44,9 @@ def test_prior_without_data_is_wide_and_centred_on_the_bias():
     assert mean.shape == std.shape == (2, 8, 2)
     np.testing.assert_allclose(mean, np.broadcast_to(bias, mean.shape))
     np.testing.assert_allclose(std, 0.5, rtol=1e-12)
-    dmean, dstd = gp.variation(np.array([0.1, 0.1]))
+    dmean, dstd = gp.variation(np.array([[0.5, 0.5]]), np.array([0.1, 0.1]))
     np.testing.assert_allclose(dmean, 0.0)
-    assert dstd.shape == (8, 2) and (dstd > 0).all()
+    assert dmean.shape == (1, 8, 2) and dstd.shape == (8, 2) and (dstd > 0).all()
     np.testing.assert_allclose(gp.residual_std(), 0.1)
 
 
@@ -59,7 +59,7 @@ def test_posterior_is_the_exact_gp_posterior(synthetic_data):
     for d in range(2):
         m_ref, s_ref = _brute_force(SETTINGS, gp, pos, err, act, pts, d)
         np.testing.assert_allclose(mean[:, :, d], m_ref, atol=1e-9)
-        np.testing.assert_allclose(std[:, :, d], s_ref, atol=1e-7)
+        np.testing.assert_allclose(std[:, :, d], s_ref, atol=1e-5)  # single precision
 
 
 def test_direction_aware_model_recovers_a_field_that_differs_per_action():
@@ -107,13 +107,17 @@ def test_variation_bounds_hold_on_random_pairs(fitted_gp):
     h = np.array([0.1, 0.1])
     a = rng.uniform(0.0, 15.0, size=(3000, 2))
     b = a + rng.uniform(-1.0, 1.0, size=a.shape) * h
-    dmean, dstd = fitted_gp.variation(h)
+    dmean, dstd = fitted_gp.variation(a, h)
     ma, sa = fitted_gp.predict(a)
     mb, sb = fitted_gp.predict(b)
-    assert (np.abs(ma - mb) <= dmean + 1e-12).all()
-    assert (np.abs(sa - sb) <= dstd + 1e-12).all()
-    # and the bound is not vacuous: within a factor 20 of the largest observed change
-    assert (dmean < 20 * np.abs(ma - mb).max(axis=0)).all()
+    assert (np.abs(ma - mb) <= dmean + 1e-9).all()
+    assert (np.abs(sa - sb) <= dstd + 1e-6).all()
+    # and the bounds are not vacuous: the mean's within a factor 3 of the largest change
+    # seen at its point's corners, on average
+    signs = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+    corners = [fitted_gp.predict(a + np.array(c) * h)[0] for c in signs]
+    seen = np.max([np.abs(c - ma) for c in corners], axis=0)
+    assert dmean.mean() < 3.0 * seen.mean()
 
 
 def test_residual_std_is_estimated_per_action():
