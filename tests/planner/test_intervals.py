@@ -234,7 +234,7 @@ class _Predictor:
 @pytest.mark.parametrize(
     ("predictor", "match"),
     [
-        (_Predictor(mean_shape=(5, 2)), r"mean has shape \(5, 2\), expected \(5625, 8, 2\)"),
+        (_Predictor(mean_shape=(5, 2)), r"mean has shape \(5, 2\), expected \(2025, 8, 2\)"),
         (_Predictor(std_value=-0.01), r"std must be finite and >= 0: -0.01 at \(0, 0, 0\)"),
         (_Predictor(std_value=np.nan), "std must be finite"),
         (_Predictor(residual=np.zeros((8, 3))), r"residual std has shape \(8, 3\)"),
