@@ -56,10 +56,10 @@ this posterior).
 ``v_{a,d} = (m0 v0 + sum_i l_i^2) / (m0 + n_a)``: the leave-one-out residuals ``l_i`` of the
 hops with action ``a`` (``l_i = alpha_i / C_ii``; their mean square exceeds the noise
 variance by the leave-one-out posterior variance, so the estimate errs high), pooled with
-``m0 = residual_count`` pseudo-hops at ``v0 = var(nu) + residual_std[a, d]^2``. Two passes
-of this fixed point (start at ``v0``) per fit. These are the only quantities estimated from
-the data besides the posterior itself; they move smoothly with the data (pooled over the
-whole run, per action), so they cannot collapse after one batch.
+``m0 = residual_count`` pseudo-hops at ``v0 = var(nu) + residual_std[a, d]^2``; two steps
+of this fixed point from ``v0`` per fit. These are the only quantities estimated from the data
+besides the posterior itself; they move smoothly with the data (pooled over the whole run,
+per action), so they cannot collapse after one batch.
 """
 
 from __future__ import annotations
@@ -452,21 +452,21 @@ class LandingErrorGP:
         curvature = 0.5 * hess * float(h @ h)
         dmean = np.zeros((m, *shape))
         starts, ends = self._blocks()
+        present = np.flatnonzero(ends > starts)
         with threadpool_limits(s.num_threads, user_api="blas"):
             for lo in range(0, m, _CHUNK):
                 p = pts[lo : lo + _CHUNK]
                 ks = np.exp(-0.5 * _sq_dist(p, self._x) / s.lengthscale**2)
-                # d k / d p_j = -(p_j - x_ij) / l^2 k: one (m, n) matrix per coordinate j
-                grads = [ks * (self._x[None, :, j] - p[:, j, None]) / s.lengthscale**2
-                         for j in range(2)]  # fmt: skip
-                for d, ax in enumerate(self._axes):
-                    w = s.shared_weight[:, d]
-                    slope = np.zeros((len(p), self.n_actions))
-                    for j in range(2):
-                        g_shared = (grads[j] * w[self._a]) @ ax.alpha
-                        for a in range(self.n_actions):
-                            b = slice(starts[a], ends[a])
-                            g = w[a] * g_shared + s.own_var[a, d] * (grads[j][:, b] @ ax.alpha[b])
-                            slope[:, a] += np.abs(g) * h[j]
-                    dmean[lo : lo + len(p), :, d] = slope + curvature * ax.rkhs_norm
+                slope = np.zeros((len(p), self.n_actions, 2))
+                for j in range(2):
+                    # d k / d p_j = -(p_j - x_ij) / l^2 k
+                    grad = ks * ((self._x[None, :, j] - p[:, j, None]) / s.lengthscale**2)
+                    for d, ax in enumerate(self._axes):
+                        w = s.shared_weight[:, d]
+                        g = np.outer(grad @ (w[self._a] * ax.alpha), w)
+                        own = np.add.reduceat(grad * ax.alpha, starts[present], axis=1)
+                        g[:, present] += s.own_var[present, d] * own
+                        slope[:, :, d] += np.abs(g) * h[j]
+                norms = np.array([ax.rkhs_norm for ax in self._axes])
+                dmean[lo : lo + len(p)] = slope + curvature * norms[None, None, :]
         return dmean, dstd

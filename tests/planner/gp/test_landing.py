@@ -64,7 +64,7 @@ def test_posterior_is_the_exact_gp_posterior(synthetic_data):
 
 def test_direction_aware_model_recovers_a_field_that_differs_per_action():
     rng = np.random.default_rng(0)
-    n = 2400
+    n = 1200
     pos = rng.uniform(0.0, 15.0, size=(n, 2))
     act = rng.integers(0, 8, size=n)
     err = action_error(pos, act) + rng.normal(0.0, 0.1, size=pos.shape)
