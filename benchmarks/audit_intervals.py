@@ -1,10 +1,12 @@
 """Interval soundness audit (issue "soundness"): learned intervals vs. MuJoCo frequencies.
 
 Usage: python benchmarks/audit_intervals.py [--scenario a] [--seed 0] [--samples 200]
-       [--velocity-runs 4] [--min-pairs 150] [--attempts 4]
+       [--velocity-runs 4] [--train-runs 1] [--min-pairs 150] [--attempts 4]
 
 Runs the scenario with seed ``S`` (the training run) and ``--velocity-runs`` more runs
-(seeds ``S+1 ..``); fits the landing-error model on the training run's hops; then samples
+(seeds ``S+1 ..``); fits the landing-error model on the training run's hops (with
+``--train-runs K``, on the hops of the first ``K`` runs, as a longer run would have them:
+more data, narrower intervals, a harder test); then samples
 hops as the navigation loop makes them (:mod:`hopper_sim.audit`: a departure uniform in the
 cell, a velocity drawn from all runs' departures, the audited action requested, the
 controller's backup switch among the loop's allowed actions, each hop counted for the action
@@ -39,6 +41,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--samples", type=int, default=200)
     ap.add_argument("--velocity-runs", type=int, default=4)
+    ap.add_argument("--train-runs", type=int, default=1)
     ap.add_argument("--min-pairs", type=int, default=150)
     ap.add_argument("--attempts", type=int, default=4)
     args = ap.parse_args()
@@ -46,14 +49,23 @@ def main() -> None:
     runner = NavigationRunner(sc)
     t0 = time.perf_counter()
     runs = [collect_run_data(runner, args.seed + k) for k in range(1 + args.velocity_runs)]
-    data = replace(runs[0], velocities=np.vstack([r.velocities for r in runs]))
+    train = runs[: max(1, args.train_runs)]
+    data = replace(
+        runs[0],
+        positions=np.vstack([r.positions for r in train]),
+        errors=np.vstack([r.errors for r in train]),
+        actions=np.concatenate([r.actions for r in train]),
+        velocities=np.vstack([r.velocities for r in runs]),
+    )
     print(
-        f"training run (seed {args.seed}): {len(data.positions)} hops; departure velocities "
-        f"from {len(runs)} runs: {len(data.velocities)} ({time.perf_counter() - t0:.1f} s)"
+        f"training data (seeds {args.seed}..{args.seed + len(train) - 1}): "
+        f"{len(data.positions)} hops; departure velocities from {len(runs)} runs: "
+        f"{len(data.velocities)} ({time.perf_counter() - t0:.1f} s)"
     )
     grid = runner.grid
-    order = list(np.unique(grid.locate(runs[0].positions)))
-    others = np.concatenate([grid.locate(r.positions) for r in runs[1:]] or [np.zeros(0, int)])
+    order = list(np.unique(grid.locate(data.positions)))
+    rest = runs[len(train) :]
+    others = np.concatenate([grid.locate(r.positions) for r in rest] or [np.zeros(0, int)])
     counts = np.bincount(others, minlength=grid.n_states)[: grid.n_cells]
     for c in np.argsort(-counts, kind="stable"):
         if int(grid.enabled[order].sum()) >= args.min_pairs or counts[c] == 0:
