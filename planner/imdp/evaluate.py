@@ -69,15 +69,16 @@ def chain_reach(matrix: sp.csr_matrix, states: np.ndarray, fixed_val: np.ndarray
     Returns:
         ``(n_states,)``: ``fixed_val`` outside ``states``, the reachability values on them.
     """
+    # float dust of the adversary's leftover mass (1e-16) can link a closed class to the
+    # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
+    # _DUST only lowers the least solution, so the value stays a lower bound.
+    matrix = sp.csr_matrix(matrix, copy=True)
+    matrix.data[matrix.data < _DUST] = 0.0
+    matrix.eliminate_zeros()
     base = np.asarray(fixed_val, dtype=np.float64).copy()
     base[states] = 0.0
     b = matrix @ base
     inner = matrix[:, states].tocsr()
-    # float dust of the adversary's leftover mass (1e-16) can link a closed class to the
-    # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
-    # _DUST only lowers the least solution, so the value stays a lower bound.
-    inner.data[inner.data < _DUST] = 0.0
-    inner.eliminate_zeros()
     live = np.flatnonzero(_reaching(inner, b > 0))
     out = base
     if live.size:

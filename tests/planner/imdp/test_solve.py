@@ -288,3 +288,21 @@ def test_local_strategy_iteration_on_a_slow_corner(monkeypatch):
     plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
     slow = solve(Problem(m, Specification(ReachAvoid("g"))), plain)
     assert np.all(slow.values[2 + n_fast :] < 0.01) and slow.evaluations == 0
+
+
+def test_chain_reach_ignores_float_dust_that_closes_a_class():
+    # states 0 <-> 1 keep all their mass between them except for a 1e-17 leak into the
+    # target 2: numerically a closed class, whose linear system is singular
+    import scipy.sparse as sp
+
+    from planner.imdp.evaluate import chain_reach
+
+    for leak_row in (0, 1):
+        m = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+        m[leak_row, 2] = 1e-17
+        out = chain_reach(sp.csr_matrix(m), np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+        assert np.isfinite(out).all() and out[0] == out[1] == 0.0
+    # a real leak is kept
+    m = sp.csr_matrix(np.array([[0.0, 0.5, 0.5], [1.0, 0.0, 0.0]]))
+    out = chain_reach(m, np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(out[:2], 1.0)
