@@ -85,9 +85,9 @@ estimates, not integrated over); (ii) the selection caveat of 2; (iii) simultane
 continuum of a cell: the margins put the posterior band ``mu(x) +- beta s(x)`` of every point
 of a cell inside the bounds, and 1 holds at every point, but no statement about the supremum
 of the sample path over a cell is made; (iv) runs longer than ``H`` hops after the switch
-(the miss bound grows with the hops; a worst-case probability of 1 reached through small
-lower bounds may need many hops, which is why lower bounds below :data:`LOWER_FLOOR` are
-dropped); (v) failed hops (the hopper falls), which the abstraction does not model. The
+(the miss bound grows with the hops, and the worst-case satisfaction probability is an
+unbounded-horizon one: a value of 1 reached through small lower bounds of progress may need
+many hops); (v) failed hops (the hopper falls), which the abstraction does not model. The
 empirical checks against MuJoCo are ``benchmarks/audit_intervals.py`` (per pair successor
 frequencies) and ``benchmarks/guarantee.py`` (the end-to-end rate).
 """
@@ -320,10 +320,6 @@ def axis_intervals(
     )
 
 
-LOWER_FLOOR = 1e-3
-"""Lower bounds below this are set to 0 (see :func:`transition_intervals`)."""
-
-
 def transition_intervals(
     bounds: CellErrorBounds,
     grid: GridWorld,
@@ -333,11 +329,7 @@ def transition_intervals(
 
     ``noise`` is the known landing noise nu; the residual of ``bounds`` is added to it.
     Successors with upper bound exactly 0 (unreachable given the bounded noise) are left out;
-    ``out`` (index ``nx * ny``) appears wherever leaving the world is possible. Lower bounds
-    below :data:`LOWER_FLOOR` are set to 0: a smaller lower bound only widens an interval (it
-    stays sound), and it removes the dust of the noise tails, which would otherwise give
-    worst-case probabilities that are positive but astronomically small (1e-73 measured on a
-    prior abstraction) where the adversary can block every route in practice.
+    ``out`` (index ``nx * ny``) appears wherever leaving the world is possible.
     """
     ax = axis_intervals(bounds, grid, noise)
     n_cells, rows = grid.n_cells, len(ax.state)
@@ -347,7 +339,6 @@ def transition_intervals(
     out_hi = np.clip(1.0 - ax.inside_x[:, 0] * ax.inside_y[:, 0], 0.0, 1.0)
     lower = np.concatenate([lower, out_lo[:, None]], axis=1)
     upper = np.concatenate([upper, out_hi[:, None]], axis=1)
-    lower[lower < LOWER_FLOOR] = 0.0
     row, succ = np.nonzero(upper > 0.0)
     return TransitionIntervals(
         state=ax.state[row],
