@@ -12,11 +12,13 @@ One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"
    (:class:`~hopper_sim.environment.HopperGridEnv`) turns it into touchdown angles (with the
    controller's backup switch among the same allowed actions) and hops in MuJoCo with the
    terrain field, noise and thrust; the departure position and the landing error
-   ``landing - target`` are recorded; the automaton reads the label of the cell landed in;
-   the reward is paid as the scenario's ``collect`` says. Where cells pay once, a first
-   landing in a cell with a (known or believed) nonzero reward re-solves the reward plan with
-   that cell at 0 (:func:`planner.learning.replan_reward`, timed as ``replan``).
-3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
+   ``landing - target`` (relative to the executed action's target) and the executed action
+   are recorded for the landing-error model; the automaton reads the label of the cell
+   landed in; the reward is paid as the scenario's ``collect`` says. Where cells pay once, a
+   first landing in a cell with a (known or believed) nonzero reward re-solves the reward plan
+   with that cell at 0 (:func:`planner.learning.replan_reward`, timed as ``replan``).
+3. After every ``batch_size`` hops the landing-error model (its prior derived from the
+   scene, :func:`hopper_sim.error_prior.error_prior`) is refitted on all data of the run and the
    abstraction and policies re-synthesised. After the switch to goal reaching the data are
    still recorded and the model re-synthesised, but the goal-reaching plan of the switch is
    kept (:class:`~planner.policy.SwitchingPolicy`, ``keep_goal_plan``): the reported
@@ -46,6 +48,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.error_prior import error_prior
 from hopper_sim.events import (
     HopEvent,
     Observer,
@@ -72,12 +75,14 @@ class RunnerSettings:
 
     Attributes:
         env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
-        delta: the interval confidence parameter (intervals hold with probability >= 1 -
-            delta under the GP model, see :mod:`planner.intervals`).
+        delta: the interval confidence parameter (a run of up to 100 hops after the switch
+            keeps its hops' errors inside their intervals with probability >= 1 - delta under
+            the landing-error model, see :mod:`planner.intervals`).
         beta: the interval multiplier instead of the one ``delta`` gives (``None``: from
             ``delta``); an override for studies of the guarantee, not a calibrated value.
         samples_per_axis: sample points per cell and axis for the per-cell error bounds.
-        gp: GP fitting settings.
+        gp: the landing-error model's prior (default: derived from the scene and the
+            controller, :func:`hopper_sim.error_prior.error_prior`).
         map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
         q_learning: online Q-learning settings for an unknown reward (its discount is the
             scenario's).
@@ -186,9 +191,12 @@ class NavigationRunner:
                     prior_reward=qs.prior_reward,
                 ),
             )
-        # torch/gpytorch start-up costs (seconds, once per process) out of the batch timings
-        with torch_threads(self.settings.torch_threads):
-            LandingErrorGP(self.settings.gp).warm_up()
+        self.gp_settings = self.settings.gp or error_prior(
+            self.env.model,
+            self.env.controller,
+            terrain=self.env.settings.terrain,
+            cell=scenario.world.cell,
+        )
         res = self.settings.map_resolution
         w = scenario.world
         self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
@@ -208,6 +216,7 @@ class NavigationRunner:
         gp: LandingErrorGP,
         positions: list[np.ndarray],
         errors: list[np.ndarray],
+        actions: list[int],
         current: int | None,
         previous: Resynthesis | None = None,
     ) -> Resynthesis:
@@ -220,6 +229,7 @@ class NavigationRunner:
             self.automaton,
             pos,
             err,
+            actions=np.asarray(actions, dtype=np.int64),
             reward=self.env.reward_table if known else None,
             learner=self.learner,
             initial_cell=self.scenario.start_cell,
@@ -270,6 +280,8 @@ class NavigationRunner:
     ) -> SynthesisEvent:
         gx, gy = np.meshgrid(self.map_x, self.map_y, indexing="ij")
         mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
+        # the map shows, per point, the mean over the actions and the largest std
+        mean, std = mean.mean(axis=1), std.max(axis=1)
         shape = (*gx.shape, 2)
         return SynthesisEvent(
             run_index=run_index,
@@ -291,15 +303,17 @@ class NavigationRunner:
 
     def _run(self, seed: int, run_index: int) -> RunEnd:
         t_start = self.clock()
-        env_seed, policy_seed, gp_seed = np.random.SeedSequence(seed).generate_state(3)
+        # the third word seeded the old GP's k-means; kept so that a seed's draws stay the same
+        env_seed, policy_seed, _ = np.random.SeedSequence(seed).generate_state(3)
         rng = np.random.default_rng(policy_seed)
         self.observer.on_run_start(RunStart(run_index, self.scenario, int(seed)))
         obs, _ = self.env.reset(seed=int(env_seed))
         if self.learner is not None:
             self.learner.collected[:] = False
-        gp = LandingErrorGP(self.settings.gp, seed=int(gp_seed))
+        gp = LandingErrorGP(self.gp_settings)
         positions: list[np.ndarray] = []
         errors: list[np.ndarray] = []
+        actions: list[int] = []
         timings = {"gp_fit": 0.0, "abstraction": 0.0, "synthesis": 0.0, "hops": 0.0}
         timings["replan"] = 0.0
         records: list[ResynthesisRecord] = []
@@ -322,7 +336,7 @@ class NavigationRunner:
             records.append(record)
             self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res, record))
 
-        res = self._synthesise(gp, positions, errors, None)
+        res = self._synthesise(gp, positions, errors, actions, None)
         product = res.product
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
@@ -350,6 +364,7 @@ class NavigationRunner:
                 break
             positions.append(si.start_pos)
             errors.append(si.error)
+            actions.append(int(si.decision.executed))
             landed = int(obs["cell"])
             first = bool(info.get("first_landing", False))
             nxt = product.step(pstate, landed)
@@ -408,7 +423,7 @@ class NavigationRunner:
             elif self.accepting_sink[q]:
                 outcome, reason = "success", "specification satisfied"
             elif steps % rp.batch_size == 0:
-                res = self._synthesise(gp, positions, errors, pstate, res)
+                res = self._synthesise(gp, positions, errors, actions, pstate, res)
                 product = res.product
                 install(res, steps, pstate)
             elif self.pays_once and first and believed != 0.0:

@@ -2,10 +2,12 @@
 
 Steps (docs/design.md "Policies" and "Rewards"), timed separately:
 
-1. ``gp_fit``: refit the landing-error GPs on all data (warm-started).
-2. ``abstraction``: per-cell error bounds, transition intervals, the grid IMDP and the
-   MT-PIMDP product with the automaton and the reward still to be collected (``W``, with the
-   cells this run has already collected at 0 where cells pay once per run).
+1. ``gp_fit``: condition the direction-aware landing-error model on all hops so far
+   (departure position, landing error, executed action; :class:`~planner.gp.LandingErrorGP`).
+2. ``abstraction``: per-(cell, action) error bounds, transition intervals, the grid IMDP and
+   the MT-PIMDP product with the automaton and the reward still to be collected (``W``, with
+   the cells this run has already collected at 0 where cells pay once per run;
+   :mod:`planner.intervals` states what the intervals guarantee).
 3. ``synthesis``: worst-case satisfaction probabilities; the nonviolating sub-model; the
    paper's MEC choice (Section V-C) among the pessimistic maximal end components of the
    *nonviolating* sub-model (``candidates="nonviolating"``, the default): those reachable from
@@ -106,7 +108,8 @@ CANDIDATES: tuple[str, ...] = ("nonviolating", "accepting")
 @dataclass(frozen=True)
 class ResynthesisSettings:
     """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
-    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``).
+    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``; ``noise`` is the
+    known landing noise nu, which must be the one of the GP's prior).
 
     ``candidates``: the end components the exploration steers to: ``"nonviolating"``
     (default: the pessimistic MECs of the nonviolating sub-model, as the paper defines
@@ -118,8 +121,9 @@ class ResynthesisSettings:
     reward to the RL action.
     """
 
-    samples_per_axis: int = 5
+    samples_per_axis: int = 3
     delta: float = 0.01
+    horizon: int = 100
     beta: float | None = None
     noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
     p_sat: float = 0.65
@@ -162,6 +166,9 @@ class Resynthesis:
     synthesis_detail: dict[str, float]
 
 
+_NEGLIGIBLE = 1e-8  # the default tolerance of robust value iteration
+
+
 def fallback_strategy(
     product: ProductIMDP, satisfaction: Solution, nonviolating: SubModel
 ) -> np.ndarray:
@@ -184,12 +191,14 @@ def fallback_strategy(
     """
     pm = product.model
     best = satisfaction.strategy.copy()
-    open_ = (satisfaction.values <= 0.0) | (best < 0)
+    # values within the solver's tolerance of 0 are 0: astronomically small positive values
+    # (products of small lower bounds) come with arbitrary strategies
+    open_ = (satisfaction.values <= _NEGLIGIBLE) | (best < 0)
     if not open_.any():
         return best
     fail = product.failure_states()
     back = solve(Problem(pm, Specification(ReachAvoid(nonviolating.states & ~fail, fail))))
-    use_back = open_ & (back.values > 0.0) & (back.strategy >= 0)
+    use_back = open_ & (back.values > _NEGLIGIBLE) & (back.strategy >= 0)
     best = np.where(use_back, back.strategy, best)
     rest = open_ & ~use_back
     if rest.any():
@@ -264,6 +273,7 @@ def resynthesise(
     positions: np.ndarray,
     errors: np.ndarray,
     *,
+    actions: np.ndarray | None = None,
     reward: np.ndarray | None = None,
     learner: RobustQLearner | None = None,
     initial_cell: int = 0,
@@ -276,10 +286,11 @@ def resynthesise(
     """Refit, rebuild and re-synthesise (see the module docstring).
 
     Args:
-        gp: the landing-error model, refitted in place on ``positions``/``errors``.
+        gp: the landing-error model, refitted in place on ``positions``/``errors``/``actions``.
         grid: the world (labels included).
         automaton: the Rabin automaton of the mandatory task.
         positions, errors: all departure positions and landing errors so far, ``(N, 2)``.
+        actions: the executed action of every hop, ``(N,)`` (required when ``N > 0``).
         reward: known ``W`` per grid state (``grid.n_states``); exactly one of ``reward``
             and ``learner`` must be given.
         learner: for an unknown reward, a learner over the product states whose cells are
@@ -299,11 +310,25 @@ def resynthesise(
     if (reward is None) == (learner is None):
         raise PolicyError("give exactly one of reward (known W) and learner (unknown W)")
     s = settings or ResynthesisSettings()
+    if gp.settings.noise != s.noise:
+        raise PolicyError(
+            f"the GP's landing noise {gp.settings.noise} differs from the intervals' {s.noise}"
+        )
+    n_hops = int(np.shape(positions)[0]) if np.ndim(positions) else 0
+    if actions is None:
+        if n_hops:
+            raise PolicyError(f"{n_hops} hops given without their executed actions")
+        actions = np.zeros(0, dtype=np.int64)
     t0 = clock()
-    fit = gp.fit(positions, errors)
+    fit = gp.fit(positions, errors, actions)
     t1 = clock()
     bounds = cell_error_bounds(
-        gp, grid, samples_per_axis=s.samples_per_axis, delta=s.delta, beta=s.beta
+        gp,
+        grid,
+        samples_per_axis=s.samples_per_axis,
+        delta=s.delta,
+        horizon=s.horizon,
+        beta=s.beta,
     )
     intervals = transition_intervals(bounds, grid, s.noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])

@@ -38,6 +38,9 @@ it is improved: the accepted values are within ``ORDER_SLACK`` times the row len
 ``V_sigma`` (floating-point noise must not keep the adversary iteration going)."""
 
 
+_DUST = 1e-12
+
+
 def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     """States with a path (edges ``adj > 0``) to a seed, seeds included."""
     k = adj.shape[0]
@@ -74,6 +77,12 @@ def chain_reach(
         ``(n_states,)``: ``fixed_val`` outside ``states``, the reachability values on them;
         with ``error``, ``(values, steps, residual)``.
     """
+    # float dust of the adversary's leftover mass (1e-16) can link a closed class to the
+    # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
+    # _DUST only lowers the least solution, so the value stays a lower bound.
+    matrix = sp.csr_matrix(matrix, copy=True)
+    matrix.data[matrix.data < _DUST] = 0.0
+    matrix.eliminate_zeros()
     base = np.asarray(fixed_val, dtype=np.float64).copy()
     base[states] = 0.0
     b = matrix @ base

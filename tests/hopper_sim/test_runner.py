@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from hopper_sim.environment import EnvSettings, EpisodeError, HopperGridEnv
-from hopper_sim.events import Observer
-from hopper_sim.runner import NavigationRunner, RunnerSettings, automaton_sinks
-from planner.gp import FitSettings
+from hopper_sim.events import HopEvent, Observer
+from hopper_sim.runner import NavigationRunner, automaton_sinks
 from planner.imdp.grid import ACTIONS
 from planner.ltl.translate import translate
 from planner.scenario import load_scenario, parse_scenario, resolve_scenario_path
@@ -126,32 +125,31 @@ def test_env_without_perturbations_lands_near_target(short_a, env):
 
 def test_unknown_reward_learner_carries_over(short_a, env):
     sc = dataclasses.replace(short_a, reward_known=False).with_runner(max_steps=6)
-    runner = NavigationRunner(sc, env=env)
+    cells: dict[int, set[int]] = {}
+
+    class Landings(Observer):
+        def on_hop(self, event: HopEvent) -> None:
+            cells.setdefault(event.run_index, set()).add(event.cell)
+
+    runner = NavigationRunner(sc, env=env, observer=Landings())
     ends = runner.run_many(2, seed=5)
     assert [e.run_index for e in ends] == [0, 1]
     assert runner.learner is not None
-    landed = sum(e.steps - e.reason.startswith("hop failed") for e in ends)
-    assert runner.learner.reward_count.sum() == landed
+    # the scenario pays once: the learner sees each run's first landing in a cell, once
+    assert sc.collect == "once"
+    assert runner.learner.reward_count.sum() == sum(len(c) for c in cells.values())
 
 
 @pytest.mark.parametrize("seed", [16, 18])
 def test_goal_plan_of_the_switch_is_followed_to_the_goal(seed):
     # seed 18 used to time out (a re-synthesis after the switch dropped its state from the
     # satisfying sub-model and it explored until the cap); seed 16 hit a hazard when the run
-    # was kept in goal reaching with a generic fallback action instead. What this pins is the
-    # kept goal plan after a switch, so the run is set up to switch: a prior of 0.3 m with a
-    # multiplier of 2.5 gives P = 0 at the start and a switch once the first refit has
-    # narrowed the intervals (the default guarantee is the [soundness] issue's business).
+    # was kept in goal reaching with a generic fallback action instead
     sc = load_scenario("a")
     obs = Collect()
-    runner = NavigationRunner(
-        sc, observer=obs, settings=RunnerSettings(gp=FitSettings(prior_std=0.3))
-    )
-    runner.synthesis_settings = dataclasses.replace(runner.synthesis_settings, beta=2.5)
-    end = runner.run(seed=seed)
+    end = NavigationRunner(sc, observer=obs).run(seed=seed)
     assert end.reason not in ("hazard", "left the map")
     assert end.switch_step is not None and end.p_switch > sc.p_sat
-    assert end.switch_step >= sc.runner.batch_size  # learned first
     assert end.left_plan_step is None
     hops = [e for k, e in obs.events if k == "hop"]
     assert {h.phase for h in hops[end.switch_step :]} == {"goal_reaching"}

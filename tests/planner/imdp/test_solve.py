@@ -358,3 +358,21 @@ def test_discounted_bracket_contains_reference():
     ref = ref_discounted(m, w, 0.8, pessimistic=True)
     assert sol.converged and sol.error < 1e-9
     assert np.all(sol.lower <= ref + 1e-12) and np.all(ref <= sol.upper + 1e-12)
+
+
+def test_chain_reach_ignores_float_dust_that_closes_a_class():
+    # states 0 <-> 1 keep all their mass between them except for a 1e-17 leak into the
+    # target 2: numerically a closed class, whose linear system is singular
+    import scipy.sparse as sp
+
+    from planner.imdp.evaluate import chain_reach
+
+    for leak_row in (0, 1):
+        m = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+        m[leak_row, 2] = 1e-17
+        out = chain_reach(sp.csr_matrix(m), np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+        assert np.isfinite(out).all() and out[0] == out[1] == 0.0
+    # a real leak is kept
+    m = sp.csr_matrix(np.array([[0.0, 0.5, 0.5], [1.0, 0.0, 0.0]]))
+    out = chain_reach(m, np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(out[:2], 1.0)
