@@ -1,10 +1,11 @@
 """The interval-MDP abstraction of case study (a), before and after learning (no MuJoCo).
 
 Builds the grid world of scenario ``a``, the transition intervals that the landing-error GP
-prior alone allows (wide: the robot knows nothing yet), the product with the automaton of
-``!Haz U Goal`` and its worst-case satisfaction probability from the start; then feeds the GP
-landing errors of a made-up smooth terrain (as if the robot had hopped everywhere) and shows
-how the intervals shrink and the guarantee grows.
+prior alone allows (wide: the robot knows nothing yet; a uniform push of 0.25 m std and a
+local field of 0.06 m, about the shipped scene's), the product with the automaton of
+``!Haz U Goal`` and its worst-case satisfaction probability from the start; then feeds the
+model the landing errors of a made-up terrain (a uniform push plus a smooth field, 400 hops
+of random actions anywhere) and shows how the intervals shrink and the guarantee grows.
 
     python examples/02_abstraction.py
 """
@@ -12,6 +13,7 @@ how the intervals shrink and the guarantee grows.
 import numpy as np
 
 from planner import (
+    FitSettings,
     GridWorld,
     LandingErrorGP,
     ProductIMDP,
@@ -37,7 +39,8 @@ def main() -> None:
     grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
     noise = TruncatedGaussianNoise(0.1, 0.2)  # sigma, bound [m] (the MJCF's defaults)
 
-    prior, wide = product_of(sc, grid, LandingErrorGP(), noise)
+    prior_settings = FitSettings(field_std=0.06, offset_std=0.25, bias_std=0.05, noise=noise)
+    prior, wide = product_of(sc, grid, LandingErrorGP(prior_settings), noise)
     p0 = prior.satisfaction().values[prior.initial]
     w0 = float(np.mean(wide.upper - wide.lower))
     print(f"{sc.name}: {sc.formula}, {grid.n_states} grid states, {prior.model.n_states} product")
@@ -45,9 +48,11 @@ def main() -> None:
 
     rng = np.random.default_rng(0)
     x = rng.uniform(0.0, w.width, size=(400, 2))
-    error = 0.35 * np.stack([np.sin(x[:, 1] / 3.0), np.cos(x[:, 0] / 4.0)], axis=1)
-    gp = LandingErrorGP(seed=0)
-    gp.fit(x, error + rng.normal(0.0, 0.02, size=error.shape))
+    actions = rng.integers(0, 8, size=400)  # N1, N2, E1, E2, S1, S2, W1, W2
+    push = np.array([0.2, -0.1])  # metres, the same everywhere
+    error = push + 0.05 * np.stack([np.sin(x[:, 1] / 3.0), np.cos(x[:, 0] / 4.0)], axis=1)
+    gp = LandingErrorGP(prior_settings)
+    gp.fit(x, error + rng.normal(0.0, 0.1, size=error.shape), actions)
     learnt, narrow = product_of(sc, grid, gp, noise)
     p1 = learnt.satisfaction().values[learnt.initial]
     w1 = float(np.mean(narrow.upper - narrow.lower))

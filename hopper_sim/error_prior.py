@@ -19,7 +19,8 @@ What the robot's designer knows before the first hop, and how it enters the prio
   acting as a constant stance force: a landing moves by about ``J F`` under a stance force
   ``F``, ``J`` [m/N] the sensitivity (measured: 2.7-3.1 mm/N for one-cell hops and across
   two-cell hops, 0.7-1.0 mm/N along two-cell hops, cross terms below 0.05 mm/N). The prior
-  takes ``field_std = A J_max`` (``J_max`` measured from the steady gait for every action)
+  takes ``field_std = A J_max`` (``J_max`` measured from the steady gait for every action),
+  ``offset_std = A_0 J_max`` for the uniform part of the force (``terrain_offset`` ``A_0``)
   and ``lengthscale = ell``.
 * **The landing noise** nu of the scene (``noise_sigma``, ``noise_bound``).
 
@@ -238,13 +239,15 @@ def error_prior(
 ) -> FitSettings:
     """The prior of the landing-error model for this hopper and scene (module docstring):
     ``bias_mean`` and ``residual_std`` from the calibration, ``bias_std`` =
-    :data:`BIAS_STD`, ``field_std = A J_max`` (0 without terrain), ``lengthscale = ell`` and
+    :data:`BIAS_STD`, ``field_std = A J_max`` and ``offset_std = A_0 J_max`` (0 without
+    terrain), ``lengthscale = ell`` and
     the scene's landing noise; other :class:`~planner.gp.FitSettings` fields by name."""
     cal = load_calibration(model, controller, cell)
     pp = model.perturbation
     values: dict[str, object] = {
         "lengthscale": pp.terrain_lengthscale,
         "field_std": pp.terrain_amplitude * cal.sensitivity if terrain else 0.0,
+        "offset_std": pp.terrain_offset * cal.sensitivity if terrain else 0.0,
         "bias_mean": cal.bias,
         "bias_std": BIAS_STD,
         "residual_std": cal.spread,

@@ -57,6 +57,8 @@ class PerturbationParams:
         terrain_amplitude: standard deviation of each axis of the terrain force [N].
         terrain_lengthscale: RBF length scale of the terrain field [m].
         terrain_features: number of random Fourier features per axis.
+        terrain_offset: standard deviation of each axis of the uniform part of the terrain
+            force (one draw per terrain seed) [N].
         noise_sigma: standard deviation of the landing noise nu [m].
         noise_bound: nu is truncated to [-noise_bound, noise_bound] [m].
     """
@@ -64,6 +66,7 @@ class PerturbationParams:
     terrain_amplitude: float
     terrain_lengthscale: float
     terrain_features: int
+    terrain_offset: float
     noise_sigma: float
     noise_bound: float
 
@@ -77,6 +80,7 @@ _NUMERIC_KEYS = {
     "terrain_amplitude": C.NUMERIC_TERRAIN_AMPLITUDE,
     "terrain_lengthscale": C.NUMERIC_TERRAIN_LENGTHSCALE,
     "terrain_features": C.NUMERIC_TERRAIN_FEATURES,
+    "terrain_offset": C.NUMERIC_TERRAIN_OFFSET,
     "noise_sigma": C.NUMERIC_NOISE_SIGMA,
     "noise_bound": C.NUMERIC_NOISE_BOUND,
 }
@@ -193,6 +197,7 @@ class HopperModel:
             terrain_amplitude=numeric(C.NUMERIC_TERRAIN_AMPLITUDE),
             terrain_lengthscale=numeric(C.NUMERIC_TERRAIN_LENGTHSCALE),
             terrain_features=int(numeric(C.NUMERIC_TERRAIN_FEATURES)),
+            terrain_offset=numeric(C.NUMERIC_TERRAIN_OFFSET),
             noise_sigma=numeric(C.NUMERIC_NOISE_SIGMA),
             noise_bound=numeric(C.NUMERIC_NOISE_BOUND),
         )

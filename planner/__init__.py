@@ -52,6 +52,7 @@ _EXPORTS: dict[str, str] = {
     "write_model": "planner.imdp.io",
     # learned intervals
     "LandingErrorGP": "planner.gp.landing",
+    "FitSettings": "planner.gp.landing",
     "TruncatedGaussianNoise": "planner.intervals",
     "cell_error_bounds": "planner.intervals",
     "transition_intervals": "planner.intervals",

@@ -8,11 +8,15 @@ Units: positions and errors in metres. Actions are indices ``0 .. A-1`` (``N1 ..
 and executes action ``a``::
 
     error_d = e_d(x, a) + nu_d + r_d
-    e_d(x, a) = c_{a,d} + u_{a,d} f_d(x) + g_{a,d}(x)
+    e_d(x, a) = c_{a,d} + u_{a,d} (o_d + f_d(x)) + (1 - u_{a,d}) o_{a,d} + g_{a,d}(x)
 
 * ``c_{a,d} ~ N(bias_mean[a, d], bias_std^2)``: a constant per action (the controller's bias:
   measured undershoots of 0.07 m for one-cell and 0.18-0.2 m for two-cell hops; for MuJoCo
   the prior mean is simulated, :mod:`hopper_sim.error_prior`);
+* ``o_d ~ N(0, offset_std^2)``: the error of a force that is the same everywhere (the
+  uniform part of the terrain force, e.g. a slope), shared by the coupled actions; an
+  uncoupled action has its own ``o_{a,d}`` of the same std. It does not vary with the
+  position, so hops anywhere teach it: this is what makes data far from a route count;
 * ``f_d ~ GP(0, rho field_std^2 k)``, ``k(x, x') = exp(-|x - x'|^2 / (2 lengthscale^2))``:
   a field shared by the actions *coupled* on axis ``d`` (``u_{a,d} = 1``; by default those
   that move at most one cell along ``d``), the terrain's common effect;
@@ -27,7 +31,8 @@ and executes action ``a``::
 So every action's position-dependent part has std ``field_std`` and length scale
 ``lengthscale``, two coupled actions' parts at the same point correlate with ``rho``, and the
 covariance of two hops' mean errors is
-``field_std^2 (rho u_a u_a' + (1 - rho u_a) [a = a']) k(x, x') + bias_std^2 [a = a']``; the
+``field_std^2 (rho u_a u_a' + (1 - rho u_a) [a = a']) k(x, x') + bias_std^2 [a = a'] +
+offset_std^2 (u_a u_a' + (1 - u_a) [a = a'])``; the
 observation noise of a hop with action ``a`` is ``var(nu) + s_{a,d}^2``.
 
 Where the numbers come from (``benchmarks/error_factors.py``: 600 loop-like departure states
@@ -99,6 +104,7 @@ class FitSettings:
 
     lengthscale: float = 2.0
     field_std: float = 0.125
+    offset_std: float = 0.0
     field_correlation: float = 0.95
     bias_mean: float | tuple = 0.0
     bias_std: float = 0.2
@@ -121,7 +127,7 @@ class FitSettings:
         value = float(self.lengthscale)
         if not np.isfinite(value) or value <= 0.0:
             raise GPDataError(f"FitSettings.lengthscale must be positive and finite, got {value}")
-        for name in ("field_std", "bias_std", "residual_count"):
+        for name in ("field_std", "offset_std", "bias_std", "residual_count"):
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0.0:
                 raise GPDataError(f"FitSettings.{name} must be finite and >= 0, got {value}")
@@ -178,7 +184,7 @@ class FitSettings:
 
     def prior_std(self) -> float:
         """Prior std of the mean error ``e_d(x, a)``, metres (every action and axis)."""
-        return float(np.hypot(self.field_std, self.bias_std))
+        return float(np.sqrt(self.field_std**2 + self.bias_std**2 + self.offset_std**2))
 
 
 @dataclass(frozen=True)
@@ -193,6 +199,7 @@ class FitReport:
     field_std: float
     field_correlation: float
     bias_std: float
+    offset_std: float = 0.0
 
 
 def _validate(
@@ -274,8 +281,10 @@ class LandingErrorGP:
     def _data_kernel(self, kx: np.ndarray, act: np.ndarray, d: int) -> np.ndarray:
         s = self.settings
         w = s.shared_weight[act, d]
+        u = np.asarray(s.coupled, dtype=np.float64)[act, d]
         same = act[:, None] == act[None, :]
-        return (np.outer(w, w) + s.own_var[act, d][:, None] * same) * kx + s.bias_std**2 * same
+        own = s.own_var[act, d][:, None] * kx + s.bias_std**2 + s.offset_std**2 * (1.0 - u)[:, None]
+        return np.outer(w, w) * kx + s.offset_std**2 * np.outer(u, u) + own * same
 
     def fit(
         self,
@@ -347,6 +356,7 @@ class LandingErrorGP:
             field_std=float(s.field_std),
             field_correlation=float(s.field_correlation),
             bias_std=float(s.bias_std),
+            offset_std=float(s.offset_std),
         )
 
     def residual_std(self) -> np.ndarray:
@@ -397,10 +407,12 @@ class LandingErrorGP:
         mean = np.zeros((m, self.n_actions, 2))
         var = np.zeros((m, self.n_actions, 2))
         for d, ax in enumerate(self._axes):
-            # cross-covariance of (x, a) with datum i: w_a w_{a_i} k + [a = a_i] (own_a k + c2)
-            w = s.shared_weight[:, d]
-            shared = ks * w[act]
-            own = ks * s.own_var[act, d] + c2  # column i: the own part for a = a_i
+            # cross-covariance of (x, a) with datum i: u_a u_{a_i} (c^2 k + o^2) +
+            # [a = a_i] (own_a k + c2 + o^2 (1 - u_a)), with w_a = c u_a the shared weight
+            w = np.asarray(s.coupled, dtype=np.float64)[:, d]
+            scale = s.field_std**2 * s.field_correlation
+            shared = (scale * ks + s.offset_std**2) * w[act]
+            own = ks * s.own_var[act, d] + (c2 + s.offset_std**2 * (1.0 - w[act]))
             g = (shared.astype(np.float32) @ ax.inv.astype(np.float32)).astype(np.float64)
             q_shared = (g * shared).sum(1)
             m_shared = shared @ ax.alpha

@@ -20,7 +20,11 @@ def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, 
     def cov(x1, a1, x2, a2):
         k = np.exp(-0.5 * ((x1[:, None, :] - x2[None, :, :]) ** 2).sum(-1) / s.lengthscale**2)
         same = a1[:, None] == a2[None, :]
-        return (np.outer(w[a1], w[a2]) + own[a1][:, None] * same) * k + s.bias_std**2 * same
+        # the uniform force's error: one offset shared by coupled actions, one per other action
+        offset = s.offset_std**2 * (np.outer(u[a1], u[a2]) + (1.0 - u[a1])[:, None] * same)
+        return (
+            (np.outer(w[a1], w[a2]) + own[a1][:, None] * same) * k + s.bias_std**2 * same + offset
+        )
 
     noise = gp.residual_std()[act, d] ** 2 + s.noise.std**2
     kxx = cov(pos, act, pos, act) + np.diag(noise)
@@ -30,7 +34,12 @@ def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, 
         qa = np.full(len(pts), a)
         ks = cov(pts, qa, pos, act)
         means.append(s.bias[a, d] + ks @ np.linalg.solve(kxx, y))
-        var = s.field_std**2 + s.bias_std**2 - (ks * np.linalg.solve(kxx, ks.T).T).sum(1)
+        var = (
+            s.field_std**2
+            + s.bias_std**2
+            + s.offset_std**2
+            - (ks * np.linalg.solve(kxx, ks.T).T).sum(1)
+        )
         stds.append(np.sqrt(var))
     return np.stack(means, 1), np.stack(stds, 1)
 
@@ -50,16 +59,37 @@ def test_prior_without_data_is_wide_and_centred_on_the_bias():
     np.testing.assert_allclose(gp.residual_std(), 0.1)
 
 
-def test_posterior_is_the_exact_gp_posterior(synthetic_data):
+@pytest.mark.parametrize("offset_std", [0.0, 0.25])
+def test_posterior_is_the_exact_gp_posterior(synthetic_data, offset_std):
     pos, err, act = (a[:120] for a in synthetic_data)
-    gp = LandingErrorGP(SETTINGS)
+    settings = FitSettings(bias_std=0.3, field_std=0.15, offset_std=offset_std)
+    gp = LandingErrorGP(settings)
     gp.fit(pos, err, act)
     pts = np.random.default_rng(2).uniform(-2.0, 17.0, size=(9, 2))
     mean, std = gp.predict(pts)
     for d in range(2):
-        m_ref, s_ref = _brute_force(SETTINGS, gp, pos, err, act, pts, d)
+        m_ref, s_ref = _brute_force(settings, gp, pos, err, act, pts, d)
         np.testing.assert_allclose(mean[:, :, d], m_ref, atol=1e-9)
         np.testing.assert_allclose(std[:, :, d], s_ref, atol=1e-5)  # single precision
+
+
+def test_a_uniform_offset_is_learned_from_hops_far_away():
+    # hops only in x < 4; the error is the controller's bias plus a uniform 0.3 m along x
+    settings = FitSettings(field_std=0.1, offset_std=0.3, bias_std=0.05, residual_std=0.02)
+    rng = np.random.default_rng(4)
+    pos = rng.uniform([0.0, 0.0], [4.0, 15.0], size=(150, 2))
+    act = rng.integers(0, 8, size=150)
+    u = np.asarray(settings.coupled, dtype=float)
+    err = np.column_stack([0.3 * np.ones(150), np.zeros(150)]) * u[act]
+    err += rng.normal(0.0, 0.1, size=err.shape)
+    gp = LandingErrorGP(settings)
+    _, prior_std = gp.predict(np.array([[13.0, 7.0]]))
+    gp.fit(pos, err, act)
+    mean, std = gp.predict(np.array([[13.0, 7.0]]))  # 9 m (4.5 length scales) from any hop
+    coupled_x = u[:, 0] == 1
+    np.testing.assert_allclose(mean[0, coupled_x, 0], 0.3, atol=0.1)
+    # what is left far away is the local field's prior (0.1) and the little still unknown
+    assert (std[0, coupled_x, 0] < 0.14).all() and (prior_std[0, :, 0] > 0.3).all()
 
 
 def test_direction_aware_model_recovers_a_field_that_differs_per_action():
