@@ -10,7 +10,8 @@ and confidence). Prints every run, then: violations (hazard or off the map; targ
 failures, timeouts; for the runs that switched, the success rate with its one-sided 95 %
 Clopper-Pearson upper bound against their mean ``p_switch`` (the promise holds when the bound
 is at least the mean); and how often a run left the goal-reaching plan of its switch and why
-(the landing that took it out, and whether the intervals of the switch allowed that landing).
+(the landing that took it out, and whether the intervals of the switch allowed that landing);
+and the stability figures of ``guarantee_stability.py`` for the same runs.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from guarantee_stability import report_stability
 from traced_runs import run_traced
 
 from planner.scenario import load_scenario
@@ -70,6 +72,7 @@ def main() -> int:
     print(f"\n{n} runs of scenario {args.scenario} in {wall:.0f} s wall")
     print(f"violations (hazard or off the map): {violations} (target 0); hop failures: {fell}")
     print(f"timeouts: {timeouts}; successes: {sum(e.outcome == 'success' for e in ends)}")
+    report_stability(traces)
     switched = [t for t in traces if t.end.p_switch is not None]
     print(f"runs that switched to goal reaching: {len(switched)} of {n}")
     if switched:

@@ -29,6 +29,27 @@ from traced_runs import run_traced
 from planner.scenario import load_scenario
 
 
+def report_stability(traces, drop: float = 0.3) -> None:
+    """Print the fraction of consecutive re-syntheses (pairs within a run) that lower P̌ at the
+    start by more than ``drop`` (target below 5 %) and the fraction of runs that switch to goal
+    reaching (target at least 90 %)."""
+    pairs = drops = 0
+    for t in traces:
+        d = np.diff(np.array(t.p_start))
+        pairs += d.size
+        drops += int((d < -drop).sum())
+    frac = drops / pairs if pairs else 0.0
+    print(
+        f"consecutive re-syntheses lowering P_start by more than {drop}: {drops} of "
+        f"{pairs} = {frac:.4f} (target < 0.05)"
+    )
+    n = len(traces)
+    switched = sum(t.end.switch_step is not None for t in traces)
+    print(
+        f"runs that switch to goal reaching: {switched} of {n} = {switched / n:.3f} (target >= 0.9)"
+    )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="a")
@@ -45,28 +66,14 @@ def main() -> int:
         key=lambda t: t.seed,
     )
     wall = time.perf_counter() - t0
-    pairs = drops = 0
     for t in traces:
-        p = np.array(t.p_start)
-        d = np.diff(p)
-        pairs += d.size
-        drops += int((d < -args.drop).sum())
-        seq = " ".join(f"{v:.2f}" for v in p)
+        seq = " ".join(f"{v:.2f}" for v in t.p_start)
         print(
             f"seed {t.seed:4d}: {t.end.outcome:9s} switch {t.end.switch_step} P_start per "
             f"re-synthesis: {seq}"
         )
-    switched = sum(t.end.switch_step is not None for t in traces)
-    n = len(traces)
-    print(f"\n{n} runs of scenario {args.scenario} in {wall:.0f} s wall")
-    frac = drops / pairs if pairs else 0.0
-    print(
-        f"consecutive re-syntheses lowering P_start by more than {args.drop}: {drops} of "
-        f"{pairs} = {frac:.4f} (target < 0.05)"
-    )
-    print(
-        f"runs that switch to goal reaching: {switched} of {n} = {switched / n:.3f} (target >= 0.9)"
-    )
+    print(f"\n{len(traces)} runs of scenario {args.scenario} in {wall:.0f} s wall")
+    report_stability(traces, args.drop)
     first = np.array([t.p_start[0] for t in traces if t.p_start])
     print(f"P_start at the first synthesis (prior): min {first.min():.3f}, max {first.max():.3f}")
     return 0
