@@ -746,5 +746,6 @@ def _mission_values(mission) -> dict:
         "window": int(mission.window),
         "window_accepted": bool(mission.window_accepted),
         "pair_visits": [int(v) for v in mission.pair_visits],
+        **{f"visits_{k}": int(v) for k, v in mission.label_visits.items()},
         "in_accepting_component": mission.in_accepting_component,
     }

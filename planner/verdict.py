@@ -29,7 +29,7 @@ have.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -240,6 +240,8 @@ class MissionReport:
         window: hops in the judged last window (0 for a settled run).
         window_accepted: whether the last window repeated forever satisfies the formula.
         pair_visits: per Rabin pair, how many hops of the last window landed in ``G_i``.
+        label_visits: per proposition of the automaton, how many hops of the last window
+            landed in a cell carrying it.
         in_accepting_component: whether the run ended inside a robustly accepting end
             component of its last synthesis (``None``: not asked).
     """
@@ -249,6 +251,7 @@ class MissionReport:
     window: int = 0
     window_accepted: bool = False
     pair_visits: tuple[int, ...] = ()
+    label_visits: dict[str, int] = field(default_factory=dict)
     in_accepting_component: bool | None = None
 
 
@@ -291,13 +294,15 @@ class MissionMonitor:
         n = len(self.letters)
         w = min(n, self.window) if self.window else max(1, n // 2)
         start = self.states[n - w]
-        accepted = window_accepts(a, start, np.asarray(self.letters[n - w :]))
+        window = np.asarray(self.letters[n - w :], dtype=np.int64)
+        bits = window[:, None] >> np.arange(len(a.propositions)) & 1
         return MissionReport(
             verdict,
             self.verdicts.obligation(q),
             w,
-            accepted,
+            window_accepts(a, start, window),
             pair_visits(a, np.asarray(self.states[n - w + 1 :])),
+            dict(zip(a.propositions, (int(v) for v in bits.sum(axis=0)), strict=True)),
             in_accepting_component,
         )
 
@@ -309,6 +314,7 @@ def describe(report: MissionReport) -> tuple[str, str]:
     if not report.window_accepted:
         return "timeout", "step cap"
     visits = ", ".join(f"pair {i}: {v}" for i, v in enumerate(report.pair_visits))
+    labels = ", ".join(f"{k}: {v}" for k, v in report.label_visits.items())
     ec = {True: "; in an accepting end component", False: "; outside every accepting end component"}
     where = ec.get(report.in_accepting_component, "")  # type: ignore[arg-type]
     if report.obligation == "safety":
@@ -318,5 +324,5 @@ def describe(report: MissionReport) -> tuple[str, str]:
     return (
         "satisfying",
         f"{report.obligation}: the last {report.window} hops repeated forever satisfy the "
-        f"formula (G visits {visits}){where}; {what}",
+        f"formula (G visits {visits}; landings {labels}){where}; {what}",
     )
