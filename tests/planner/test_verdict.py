@@ -13,8 +13,6 @@ from planner.ltl.translate import translate
 from planner.verdict import ACCEPTED, OPEN, REJECTED, AutomatonVerdicts, window_accepts
 from tests.planner import ltl_oracle
 
-AP = ("ap",)
-
 
 def ap(p: str) -> tuple:
     return ("ap", p)
