@@ -21,14 +21,15 @@ import numpy as np
 
 if TYPE_CHECKING:
     from planner.scenario import Scenario
+    from planner.verdict import MissionReport
 
 Phase = Literal["exploration", "goal_reaching", "fallback"]
 Source = Literal["LTL", "RL"]
-Outcome = Literal["success", "violation", "timeout"]
+Outcome = Literal["success", "violation", "timeout", "satisfying"]
 
 PHASES: tuple[str, ...] = ("exploration", "goal_reaching", "fallback")
 SOURCES: tuple[str, ...] = ("LTL", "RL")
-OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout")
+OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout", "satisfying")
 
 
 class EventError(ValueError):
@@ -202,7 +203,12 @@ class RunEnd:
 
     Attributes:
         run_index: the run.
-        outcome: ``"success"`` (goal), ``"violation"`` (hazard or out) or ``"timeout"``.
+        outcome: ``"success"`` (every hazard-free continuation of the run satisfies the
+            formula, e.g. the goal reached), ``"violation"`` (hazard, out, a fall, or no
+            continuation satisfies), ``"satisfying"`` (at the step cap the formula is open
+            and the last window, repeated forever, satisfies it: a recurrence or safety
+            obligation met so far) or ``"timeout"`` (the step cap otherwise);
+            :mod:`planner.verdict`.
         steps: number of hops.
         reward: total reward collected.
         switch_step: hop at which goal reaching began, or ``None`` if it never did.
@@ -220,6 +226,9 @@ class RunEnd:
         resyntheses: one :class:`ResynthesisRecord` per synthesis of the run, in order.
         collections: cells whose reward the run collected (first landings in a cell with a
             nonzero reward), whatever the scenario's ``collect``.
+        mission: what the end says about the formula (:class:`planner.verdict.MissionReport`:
+            verdict, remaining obligation, the judged window, Rabin ``G`` visits in it,
+            whether the run ended in an accepting end component).
     """
 
     run_index: int
@@ -235,6 +244,7 @@ class RunEnd:
     left_plan_step: int | None = None
     resyntheses: tuple[ResynthesisRecord, ...] = ()
     collections: int = 0
+    mission: MissionReport | None = None
 
     def __post_init__(self) -> None:
         _check_choice("outcome", self.outcome, OUTCOMES)

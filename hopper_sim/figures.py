@@ -229,7 +229,11 @@ def run_title(
     if run_number is not None:
         title += f", run {run_number}" + (f" of {n_runs}" if n_runs else "")
     if end is not None:
-        title += f": {end.outcome}, {end.steps} hops, reward {end.reward:g}"
+        mission = getattr(end, "mission", None)
+        what = end.outcome
+        if end.outcome == "satisfying" and mission is not None:
+            what += f" ({mission.obligation})"
+        title += f": {what}, {end.steps} hops, reward {end.reward:g}"
     elif hops is not None:
         title += f": {hops} hops"
     return title

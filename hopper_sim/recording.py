@@ -680,6 +680,7 @@ class RerunRecorder(Observer):
                 left_plan_step=None if left is None else int(left),
                 backups=int(event.backups),
                 collections=int(getattr(event, "collections", 0)),
+                **_mission_values(getattr(event, "mission", None)),
                 seconds=float(event.seconds),
                 sim_seconds=float(self._clock.get(k, 0.0)),
                 **timings,
@@ -733,3 +734,18 @@ def __getattr__(name: str) -> Any:
 
         return getattr(recording_reader, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _mission_values(mission) -> dict:
+    """The run's :class:`planner.verdict.MissionReport` as scalar summary values."""
+    if mission is None:
+        return {}
+    return {
+        "verdict": str(mission.verdict),
+        "obligation": str(mission.obligation),
+        "window": int(mission.window),
+        "window_accepted": bool(mission.window_accepted),
+        "pair_visits": [int(v) for v in mission.pair_visits],
+        **{f"visits_{k}": int(v) for k, v in mission.label_visits.items()},
+        "in_accepting_component": mission.in_accepting_component,
+    }

@@ -27,9 +27,15 @@ One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"
    plan's satisfying sub-model does it leave the plan (back to exploration with the latest
    synthesis, which may switch again); :attr:`~hopper_sim.events.RunEnd.left_plan_step`
    reports when.
-4. The run ends in success when the automaton reaches an accepting sink (for ``!Haz U Goal``:
-   the goal), in violation on a hazard cell, off the map, in a rejecting automaton sink, or
-   when a hop fails (the hopper fell), and in a timeout at ``max_steps`` hops.
+4. The automaton decides the outcome (:class:`planner.verdict.MissionMonitor`, one rule for
+   every class of formula): the run ends in success as soon as every hazard-free continuation
+   satisfies the formula (for ``!Haz U Goal``: the goal; for ``F(a & F goal) & G !haz``: the
+   goal after ``a``), in violation as soon as none does, on a hazard cell, off the map, or
+   when a hop fails (the hopper fell). At ``max_steps`` hops a run whose formula is still
+   open (recurrence such as ``GF a``, persistence, safety on a non-hazard label) ends
+   ``"satisfying"`` if its last window repeated forever satisfies the formula (the report
+   gives the Rabin ``G`` visits in that window and whether the run is in an accepting end
+   component), else in a timeout.
 
 With an unknown reward (``reward_known = false``) a :class:`~planner.qlearning.RobustQLearner`
 learns the reward from visits and updates its Q-values online; it persists across the runs of
@@ -57,7 +63,6 @@ from hopper_sim.events import (
     RunStart,
     SynthesisEvent,
 )
-from planner.automaton import RabinAutomaton
 from planner.gp.landing import FitSettings, LandingErrorGP
 from planner.imdp.grid import ACTIONS
 from planner.intervals import TruncatedGaussianNoise
@@ -67,6 +72,7 @@ from planner.policy import SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
 from planner.scenario import Scenario
 from planner.torch_threads import torch_threads
+from planner.verdict import ACCEPTED, REJECTED, AutomatonVerdicts, MissionMonitor, describe
 
 
 @dataclass(frozen=True)
@@ -111,17 +117,6 @@ class RunnerSettings:
     torch_threads: int = 1
 
 
-def automaton_sinks(automaton: RabinAutomaton) -> tuple[np.ndarray, np.ndarray]:
-    """Boolean masks of the accepting and the rejecting sinks of ``automaton`` (states whose
-    every transition loops; accepting iff the run staying there satisfies some Rabin pair)."""
-    table = automaton.transitions
-    sink = (table == np.arange(automaton.n_states)[:, None]).all(axis=1)
-    accepting = np.array(
-        [bool(sink[q]) and automaton.is_accepting_cycle({q}) for q in automaton.states]
-    )
-    return accepting, sink & ~accepting
-
-
 class NavigationRunner:
     """Runs navigation episodes of a scenario (see the module docstring).
 
@@ -150,7 +145,7 @@ class NavigationRunner:
         self.clock = clock
         self.grid = self.env.grid
         self.automaton = translate(scenario.formula)
-        self.accepting_sink, self.rejecting_sink = automaton_sinks(self.automaton)
+        self.verdicts = AutomatonVerdicts(self.automaton, excluded=scenario.hazard)
         pp = self.env.model.perturbation
         rp = scenario.runner
         self.synthesis_settings = ResynthesisSettings(
@@ -341,12 +336,13 @@ class NavigationRunner:
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
         install(res, 0, pstate)
-        nq = self.automaton.n_states
         total, backups, steps, collections = 0.0, 0, 0, 0
+        monitor = MissionMonitor(self.verdicts, self.scenario.runner.window)
         outcome, reason = "timeout", "step cap"
-        if self.accepting_sink[pstate % nq]:
+        verdict = monitor.start(int(product.automaton_state[pstate]))
+        if verdict == ACCEPTED:
             outcome, reason = "success", "accepted at the start"
-        elif self.rejecting_sink[pstate % nq]:
+        elif verdict == REJECTED:
             outcome, reason = "violation", "rejected at the start"
         rp = self.scenario.runner
         while outcome == "timeout" and steps < rp.max_steps:
@@ -414,13 +410,13 @@ class NavigationRunner:
                 )
             )
             pstate = nxt
-            q = pstate % nq
+            verdict = monitor.step(int(product.letters[landed]), int(product.automaton_state[nxt]))
             if terminated:
                 outcome = "violation"
                 reason = "left the map" if landed == self.grid.out else "hazard"
-            elif self.rejecting_sink[q]:
+            elif verdict == REJECTED:
                 outcome, reason = "violation", "specification violated"
-            elif self.accepting_sink[q]:
+            elif verdict == ACCEPTED:
                 outcome, reason = "success", "specification satisfied"
             elif steps % rp.batch_size == 0:
                 res = self._synthesise(gp, positions, errors, actions, pstate, res)
@@ -433,6 +429,9 @@ class NavigationRunner:
                 policy.replan_reward(rl, tour)
                 timings["replan"] += self.clock() - t0
         timings["batch_max"] = batch_max
+        mission = monitor.report(bool(product.accepting_states()[pstate]))
+        if outcome == "timeout":
+            outcome, reason = describe(mission)
         end = RunEnd(
             run_index=run_index,
             outcome=outcome,
@@ -447,6 +446,7 @@ class NavigationRunner:
             left_plan_step=policy.left_plan_step,
             resyntheses=tuple(records),
             collections=collections,
+            mission=mission,
         )
         self.observer.on_run_end(end)
         return end

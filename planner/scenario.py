@@ -214,6 +214,9 @@ class RunnerParams:
         discount: discount factor of the reward Q-learning [gamma], in (0, 1).
         runs: number of consecutive runs (Q-values and learned rewards carried over).
         seed: seed of the first run.
+        window: hops of the last window by which a run still undecided at ``max_steps`` is
+            judged (recurrence, persistence, safety formulas; 0: the last half of the run;
+            :class:`planner.verdict.MissionMonitor`).
     """
 
     batch_size: int = 50
@@ -224,6 +227,7 @@ class RunnerParams:
     discount: float = 0.95
     runs: int = 1
     seed: int = 0
+    window: int = 0
 
     def __post_init__(self) -> None:
         checks: dict[str, tuple[Callable[[Any], bool], str]] = {
@@ -235,6 +239,7 @@ class RunnerParams:
             "discount": (lambda v: 0.0 < v < 1.0, "in (0, 1)"),
             "runs": (lambda v: v >= 1, "at least 1"),
             "seed": (lambda v: v >= 0, ">= 0"),
+            "window": (lambda v: v >= 0, ">= 0"),
         }
         for name, (ok, what) in checks.items():
             value = getattr(self, name)

@@ -219,6 +219,7 @@ def _records(ends, files: dict, prov: dict) -> list[dict]:
             "p_switch": e.p_switch,
             "left_plan_step": e.left_plan_step,
             "collections": e.collections,
+            "mission": None if e.mission is None else dataclasses.asdict(e.mission),
             "resyntheses": [dataclasses.asdict(r) for r in e.resyntheses],
             "backups": e.backups,
             "seconds": e.seconds,

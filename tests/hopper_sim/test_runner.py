@@ -8,10 +8,11 @@ import pytest
 
 from hopper_sim.environment import EnvSettings, EpisodeError, HopperGridEnv
 from hopper_sim.events import HopEvent, Observer
-from hopper_sim.runner import NavigationRunner, automaton_sinks
+from hopper_sim.runner import NavigationRunner
 from planner.imdp.grid import ACTIONS
 from planner.ltl.translate import translate
 from planner.scenario import load_scenario, parse_scenario, resolve_scenario_path
+from planner.verdict import AutomatonVerdicts
 
 
 class Collect(Observer):
@@ -41,9 +42,10 @@ def env(short_a):
     return HopperGridEnv(short_a)
 
 
-def test_sinks_of_reach_avoid():
+def test_regions_of_reach_avoid():
     aut = translate("!Haz U Goal")
-    acc, rej = automaton_sinks(aut)
+    v = AutomatonVerdicts(aut, excluded="Haz")
+    acc, rej = v.accepting_region, v.rejecting_region
     assert acc.sum() == 1 and rej.sum() == 1
     assert aut.step(aut.initial, {"Goal"}) == int(np.flatnonzero(acc)[0])
     assert aut.step(aut.initial, {"Haz"}) == int(np.flatnonzero(rej)[0])
