@@ -1,7 +1,8 @@
 """Does the paper's narrative happen? Case studies (a)-(d) with the default settings.
 
 Usage: python benchmarks/fidelity.py [--seeds 5] [--sequences 5] [--workers 2] [--seed 0]
-       [--only ab|cd] [--beta B --gp-prior-std S]   (the last two: studies of the guarantee)
+       [--only ab|cd] [--beta B] [--tour reward|coverage]   (studies: the interval
+       multiplier, the in-component tour)
 
 Prints, and checks against the acceptance of issue #11 [fidelity]:
 
@@ -32,7 +33,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopper_sim.events import Observer, RunEnd
 from hopper_sim.runner import NavigationRunner, RunnerSettings
-from planner.gp import FitSettings
 from planner.scenario import load_scenario
 
 VIOLATIONS = ("hazard", "left the map")
@@ -51,17 +51,18 @@ class _Cells(Observer):
         self.cells[-1].append(int(event.cell))
 
 
-def _settings(beta: float | None, prior_std: float | None) -> RunnerSettings:
-    gp = None if prior_std is None else FitSettings(prior_std=prior_std)
-    return RunnerSettings(beta=beta, gp=gp)
+def _settings(beta: float | None, tour: str | None) -> RunnerSettings:
+    if tour is None:
+        return RunnerSettings(beta=beta)
+    return RunnerSettings(beta=beta, tour=tour)
 
 
 def _sequence(job: tuple) -> tuple[str, int, list[RunEnd], list[list[int]]]:
     """``runs`` consecutive runs of ``name`` from seed ``seed`` (one learner throughout)."""
-    name, seed, runs, beta, prior_std = job
+    name, seed, runs, beta, tour = job
     sc = load_scenario(name)
     cells = _Cells()
-    runner = NavigationRunner(sc, settings=_settings(beta, prior_std), observer=cells)
+    runner = NavigationRunner(sc, settings=_settings(beta, tour), observer=cells)
     ends = runner.run_many(runs, seed)
     return name, seed, ends, cells.cells
 
@@ -89,9 +90,9 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", choices=("ab", "cd"), default=None)
     ap.add_argument("--beta", type=float, default=None, help="interval multiplier override")
-    ap.add_argument("--gp-prior-std", type=float, default=None, help="GP prior std [m]")
+    ap.add_argument("--tour", choices=("reward", "coverage"), default=None)
     args = ap.parse_args()
-    over = (args.beta, args.gp_prior_std)
+    over = (args.beta, args.tour)
     jobs = []
     if args.only != "cd":
         jobs += [(n, args.seed + k, 1, *over) for n in ("a", "b") for k in range(args.seeds)]

@@ -60,12 +60,15 @@ _CACHE: dict[tuple[str, str, float], ErrorCalibration] = {}
 
 @dataclass(frozen=True)
 class ErrorCalibration:
-    """What :func:`calibrate` measured: ``sensitivity`` ``J_max`` [m/N]; ``bias`` and
+    """What :func:`calibrate` measured: ``sensitivity`` ``J_max`` [m/N];
+    ``sensitivity_table`` ``(8, 2)`` [m/N], per action and axis the largest sensitivity of
+    the landing to a uniform stance force along that axis over the chain states; ``bias`` and
     ``spread`` ``(8, 2)`` [m], mean and std of the controller's landing error per action and
     axis, for cells of side ``cell`` [m]; the fingerprints of the model and controller; the
     chain length and seed."""
 
     sensitivity: float
+    sensitivity_table: tuple[tuple[float, float], ...]
     bias: tuple[tuple[float, float], ...]
     spread: tuple[tuple[float, float], ...]
     cell: float
@@ -81,7 +84,8 @@ class ErrorCalibration:
     def from_json(cls, text: str) -> ErrorCalibration:
         raw = json.loads(text)
         raw["bias"] = tuple(tuple(float(v) for v in row) for row in raw["bias"])
-        raw["spread"] = tuple(tuple(float(v) for v in row) for row in raw["spread"])
+        for key in ("spread", "sensitivity_table"):
+            raw[key] = tuple(tuple(float(v) for v in row) for row in raw[key])
         return cls(**raw)
 
 
@@ -124,6 +128,35 @@ def _max_sensitivity(
     jx = (land[0][:, 0] - land[1][:, 0]) / (2.0 * force)
     jy = (land[2][:, 1] - land[3][:, 1]) / (2.0 * force)
     return float(max(np.abs(jx).max(), np.abs(jy).max()))
+
+
+def _sensitivity_table(
+    model: HopperModel,
+    controller: LegAngleController,
+    vel: np.ndarray,
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    ok: np.ndarray,
+    force: float,
+) -> np.ndarray:
+    """``(n_actions, 2)`` [m/N]: per action and axis the largest ``|d landing_d / d F_d|``
+    over the chain states where the action is executed as requested (central differences
+    under a uniform stance force of ``+-force`` newtons along each axis)."""
+    n_states, n_act = alpha.shape
+    energy = nominal_energy(model, controller.steady.speed)
+    land = []
+    for f in ((force, 0.0), (-force, 0.0), (0.0, force), (0.0, -force)):
+        res = simulate_hops(
+            model, np.repeat(vel, n_act, 0), alpha.ravel(), beta.ravel(),
+            terrain=_Uniform(f), thrust=True, nominal_energy=energy,
+        )  # fmt: skip
+        ok = ok & res.ok.reshape(n_states, n_act)
+        land.append(res.next_pos.reshape(n_states, n_act, 2))
+    jx = np.abs(land[0][..., 0] - land[1][..., 0]) / (2.0 * force)
+    jy = np.abs(land[2][..., 1] - land[3][..., 1]) / (2.0 * force)
+    j = np.stack([jx, jy], axis=-1)
+    j[~ok] = 0.0
+    return j.max(axis=0)
 
 
 def _chain_states(
@@ -187,6 +220,7 @@ def calibrate(
             f"calibration: actions {np.flatnonzero(ok.sum(axis=0) < 2).tolist()} were executed "
             "as requested from fewer than 2 chain states"
         )
+    table_j = _sensitivity_table(model, controller, vel, alpha, beta, ok, force)
     w = ok[..., None].astype(float)
     mean = (err * w).sum(0) / w.sum(0)
     spread = np.sqrt((((err - mean) ** 2) * w).sum(0) / (w.sum(0) - 1.0))
@@ -194,8 +228,10 @@ def calibrate(
     def table(a: np.ndarray) -> tuple[tuple[float, float], ...]:
         return tuple((float(x), float(y)) for x, y in np.round(a, 6))
 
+    steady_max = _max_sensitivity(model, controller, force, float(cell))
     return ErrorCalibration(
-        sensitivity=round(_max_sensitivity(model, controller, force, float(cell)), 9),
+        sensitivity=round(max(steady_max, float(table_j.max())), 9),
+        sensitivity_table=tuple((float(x), float(y)) for x, y in np.round(table_j, 9)),
         bias=table(mean),
         spread=table(spread),
         cell=float(cell),
@@ -229,6 +265,12 @@ def load_calibration(
     return _CACHE[key]
 
 
+def _scale(cal: ErrorCalibration) -> tuple[tuple[float, float], ...]:
+    """Each action's sensitivity relative to ``J_max``, at least 0.05 (never 0)."""
+    ratio = np.asarray(cal.sensitivity_table, dtype=np.float64) / cal.sensitivity
+    return tuple((float(x), float(y)) for x, y in np.clip(ratio, 0.05, 1.0))
+
+
 def error_prior(
     model: HopperModel,
     controller: LegAngleController,
@@ -248,6 +290,7 @@ def error_prior(
         "lengthscale": pp.terrain_lengthscale,
         "field_std": pp.terrain_amplitude * cal.sensitivity if terrain else 0.0,
         "offset_std": pp.terrain_offset * cal.sensitivity if terrain else 0.0,
+        "scale": _scale(cal),
         "bias_mean": cal.bias,
         "bias_std": BIAS_STD,
         "residual_std": cal.spread,

@@ -99,6 +99,9 @@ class FitSettings:
     ``s_{a,d}``) are scalars or ``(n_actions, 2)`` tables, stored as nested tuples;
     ``coupled``: ``(n_actions, 2)`` booleans ``u_{a,d}`` (``None``: the actions that move at
     most one cell along the axis, for the 8 grid actions);
+    ``scale``: ``(n_actions, 2)`` factors ``s_{a,d}`` in ``(0, 1]`` (or a scalar) on the std
+    with which the terrain (offset and fields) enters action ``a`` on axis ``d``: the
+    action's sensitivity to a stance force relative to the largest one (default 1);
     ``num_threads`` caps the BLAS threads of a fit or prediction (``None``: leave as is).
     """
 
@@ -113,6 +116,7 @@ class FitSettings:
     noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
     n_actions: int = N_ACTIONS
     coupled: tuple | None = None
+    scale: float | tuple = 1.0
     max_data: int = 2000
     num_threads: int | None = 1
 
@@ -131,7 +135,7 @@ class FitSettings:
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0.0:
                 raise GPDataError(f"FitSettings.{name} must be finite and >= 0, got {value}")
-        for name, nonneg in (("bias_mean", False), ("residual_std", True)):
+        for name, nonneg in (("bias_mean", False), ("residual_std", True), ("scale", True)):
             raw = np.asarray(getattr(self, name), dtype=np.float64)
             try:
                 table = np.broadcast_to(raw, (int(self.n_actions), 2))
@@ -143,6 +147,8 @@ class FitSettings:
             if not np.isfinite(table).all() or (nonneg and (table < 0).any()):
                 what = "finite and >= 0" if nonneg else "finite"
                 raise GPDataError(f"FitSettings.{name} must be {what}")
+            if name == "scale" and ((table <= 0.0) | (table > 1.0)).any():
+                raise GPDataError("FitSettings.scale must lie in (0, 1]")
             object.__setattr__(self, name, tuple(tuple(float(v) for v in r) for r in table))
         if not 0.0 <= float(self.field_correlation) <= 1.0:
             raise GPDataError(
@@ -171,20 +177,35 @@ class FitSettings:
         return np.asarray(self.residual_std, dtype=np.float64)
 
     @property
+    def coupling(self) -> np.ndarray:
+        """``(n_actions, 2)`` weights ``s_{a,d} u_{a,d}`` of the shared terms (offset, field)."""
+        return np.asarray(self.coupled, dtype=np.float64) * np.asarray(self.scale)
+
+    @property
     def shared_weight(self) -> np.ndarray:
         """``(n_actions, 2)`` std with which the shared field enters each action, metres."""
-        u = np.asarray(self.coupled, dtype=np.float64)
-        return self.field_std * np.sqrt(self.field_correlation) * u
+        return self.field_std * np.sqrt(self.field_correlation) * self.coupling
 
     @property
     def own_var(self) -> np.ndarray:
         """``(n_actions, 2)`` prior variance of each action's own field ``g``, m^2."""
         u = np.asarray(self.coupled, dtype=np.float64)
-        return self.field_std**2 * (1.0 - self.field_correlation * u)
+        return (self.field_std * np.asarray(self.scale)) ** 2 * (1.0 - self.field_correlation * u)
+
+    @property
+    def own_offset_var(self) -> np.ndarray:
+        """``(n_actions, 2)`` prior variance of an uncoupled action's own offset, m^2."""
+        u = np.asarray(self.coupled, dtype=np.float64)
+        return (self.offset_std * np.asarray(self.scale)) ** 2 * (1.0 - u)
+
+    def prior_var(self) -> np.ndarray:
+        """``(n_actions, 2)`` prior variance of the mean error ``e_d(x, a)``, m^2."""
+        terrain = (self.field_std**2 + self.offset_std**2) * np.asarray(self.scale) ** 2
+        return terrain + self.bias_std**2
 
     def prior_std(self) -> float:
-        """Prior std of the mean error ``e_d(x, a)``, metres (every action and axis)."""
-        return float(np.sqrt(self.field_std**2 + self.bias_std**2 + self.offset_std**2))
+        """The largest prior std of the mean error ``e_d(x, a)`` over actions and axes, m."""
+        return float(np.sqrt(self.prior_var().max()))
 
 
 @dataclass(frozen=True)
@@ -280,11 +301,11 @@ class LandingErrorGP:
 
     def _data_kernel(self, kx: np.ndarray, act: np.ndarray, d: int) -> np.ndarray:
         s = self.settings
-        w = s.shared_weight[act, d]
-        u = np.asarray(s.coupled, dtype=np.float64)[act, d]
+        w = s.coupling[act, d]
         same = act[:, None] == act[None, :]
-        own = s.own_var[act, d][:, None] * kx + s.bias_std**2 + s.offset_std**2 * (1.0 - u)[:, None]
-        return np.outer(w, w) * kx + s.offset_std**2 * np.outer(u, u) + own * same
+        shared = s.field_std**2 * s.field_correlation * kx + s.offset_std**2
+        own = s.own_var[act, d][:, None] * kx + (s.bias_std**2 + s.own_offset_var[act, d])[:, None]
+        return np.outer(w, w) * shared + own * same
 
     def fit(
         self,
@@ -385,9 +406,9 @@ class LandingErrorGP:
         pts = self._check_points(points)
         s = self.settings
         m, na = pts.shape[0], self.n_actions
-        prior_var = s.prior_std() ** 2
+        prior_var = s.prior_var()
         mean = np.broadcast_to(s.bias, (m, na, 2)).copy()
-        var = np.full((m, na, 2), prior_var)
+        var = np.broadcast_to(prior_var, (m, na, 2)).copy()
         if self.num_data == 0:
             return mean, np.sqrt(var)
         with threadpool_limits(s.num_threads, user_api="blas"):
@@ -397,7 +418,9 @@ class LandingErrorGP:
                 mean[sl_] += dmean
         return mean, np.sqrt(np.clip(var, 0.0, prior_var))
 
-    def _predict_block(self, pts: np.ndarray, prior_var: float) -> tuple[np.ndarray, np.ndarray]:
+    def _predict_block(
+        self, pts: np.ndarray, prior_var: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         s = self.settings
         ks = np.exp(-0.5 * _sq_dist(pts, self._x) / s.lengthscale**2)  # (m, n)
         act, c2 = self._a, s.bias_std**2
@@ -407,12 +430,11 @@ class LandingErrorGP:
         mean = np.zeros((m, self.n_actions, 2))
         var = np.zeros((m, self.n_actions, 2))
         for d, ax in enumerate(self._axes):
-            # cross-covariance of (x, a) with datum i: u_a u_{a_i} (c^2 k + o^2) +
-            # [a = a_i] (own_a k + c2 + o^2 (1 - u_a)), with w_a = c u_a the shared weight
-            w = np.asarray(s.coupled, dtype=np.float64)[:, d]
-            scale = s.field_std**2 * s.field_correlation
-            shared = (scale * ks + s.offset_std**2) * w[act]
-            own = ks * s.own_var[act, d] + (c2 + s.offset_std**2 * (1.0 - w[act]))
+            # cross-covariance of (x, a) with datum i: w_a w_{a_i} (rho f^2 k + o^2) +
+            # [a = a_i] (own_a k + c2 + own offset_a), with w_a = s_a u_a
+            w = s.coupling[:, d]
+            shared = (s.field_std**2 * s.field_correlation * ks + s.offset_std**2) * w[act]
+            own = ks * s.own_var[act, d] + (c2 + s.own_offset_var[act, d])
             g = (shared.astype(np.float32) @ ax.inv.astype(np.float32)).astype(np.float64)
             q_shared = (g * shared).sum(1)
             m_shared = shared @ ax.alpha
@@ -425,7 +447,7 @@ class LandingErrorGP:
                 b = slice(starts[a], ends[a])
                 quad[:, a] = ((own[:, b] @ ax.inv[b, b]) * own[:, b]).sum(1)
             mean[:, :, d] = w[None, :] * m_shared[:, None] + m_own
-            var[:, :, d] = prior_var - (
+            var[:, :, d] = prior_var[None, :, d] - (
                 w[None, :] ** 2 * q_shared[:, None] + 2.0 * w[None, :] * cross + quad
             )
         return mean, var

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from hopper_sim.events import Observer
-from hopper_sim.runner import NavigationRunner
+from hopper_sim.environment import EnvSettings
+from hopper_sim.runner import NavigationRunner, RunnerSettings
 from planner.scenario import load_scenario, parse_scenario
 from tests.planner import ltl_oracle
 from tests.planner.test_verdict import ISSUE, random_formulas
@@ -27,9 +28,9 @@ class Cells(Observer):
         self.cells.append(int(event.cell))
 
 
-def run(scenario, seed=0):
+def run(scenario, seed=0, settings=None):
     obs = Cells()
-    end = NavigationRunner(scenario, observer=obs).run(seed)
+    end = NavigationRunner(scenario, observer=obs, settings=settings).run(seed)
     return end, obs.cells
 
 
@@ -48,8 +49,11 @@ def test_gallery_scenario_succeeds(name, cap):
 
 
 def test_patrol_cycles_through_both_regions():
+    # without the terrain the prior is narrow and the run switches at once, so a short cap
+    # shows the cycling (with the terrain the run first learns the push: about 160 hops on
+    # seed 0; benchmarks/missions.py runs the gallery as shipped)
     sc = load_scenario(GALLERY / "patrol.toml").with_runner(max_steps=90, window=60)
-    end, _ = run(sc)
+    end, _ = run(sc, settings=RunnerSettings(env=EnvSettings(terrain=False)))
     assert end.outcome == "satisfying", end.reason
     m = end.mission
     assert m.in_accepting_component and m.window == 60

@@ -11,20 +11,22 @@ SETTINGS = FitSettings(bias_std=0.3, field_std=0.15)
 
 
 def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, d: int):
-    """The exact GP posterior of axis d at (pts, every action), from the full kernel matrix."""
+    """The exact GP posterior of axis d at (pts, every action), from the full kernel matrix of
+    the model as the module docstring writes it: e(x, a) = c_a + s_a u_a (o + f(x)) +
+    s_a (1 - u_a) o_a + g_a(x)."""
     s = settings
     u = np.asarray(s.coupled, dtype=float)[:, d]
-    own = s.field_std**2 * (1.0 - s.field_correlation * u)
-    w = s.field_std * np.sqrt(s.field_correlation) * u
+    sc = np.asarray(s.scale, dtype=float)[:, d]
+    rho = s.field_correlation
 
     def cov(x1, a1, x2, a2):
         k = np.exp(-0.5 * ((x1[:, None, :] - x2[None, :, :]) ** 2).sum(-1) / s.lengthscale**2)
         same = a1[:, None] == a2[None, :]
-        # the uniform force's error: one offset shared by coupled actions, one per other action
-        offset = s.offset_std**2 * (np.outer(u[a1], u[a2]) + (1.0 - u[a1])[:, None] * same)
-        return (
-            (np.outer(w[a1], w[a2]) + own[a1][:, None] * same) * k + s.bias_std**2 * same + offset
-        )
+        w1, w2 = (sc * u)[a1], (sc * u)[a2]
+        shared = np.outer(w1, w2) * (rho * s.field_std**2 * k + s.offset_std**2)
+        own_field = (sc[a1] ** 2 * s.field_std**2 * (1.0 - rho * u[a1]))[:, None] * k
+        own_offset = (sc[a1] ** 2 * s.offset_std**2 * (1.0 - u[a1]))[:, None]
+        return shared + (own_field + own_offset + s.bias_std**2) * same
 
     noise = gp.residual_std()[act, d] ** 2 + s.noise.std**2
     kxx = cov(pos, act, pos, act) + np.diag(noise)
@@ -33,13 +35,9 @@ def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, 
     for a in range(s.n_actions):
         qa = np.full(len(pts), a)
         ks = cov(pts, qa, pos, act)
+        prior = cov(pts[:1], qa[:1], pts[:1], qa[:1])[0, 0]
         means.append(s.bias[a, d] + ks @ np.linalg.solve(kxx, y))
-        var = (
-            s.field_std**2
-            + s.bias_std**2
-            + s.offset_std**2
-            - (ks * np.linalg.solve(kxx, ks.T).T).sum(1)
-        )
+        var = prior - (ks * np.linalg.solve(kxx, ks.T).T).sum(1)
         stds.append(np.sqrt(var))
     return np.stack(means, 1), np.stack(stds, 1)
 
@@ -59,10 +57,11 @@ def test_prior_without_data_is_wide_and_centred_on_the_bias():
     np.testing.assert_allclose(gp.residual_std(), 0.1)
 
 
-@pytest.mark.parametrize("offset_std", [0.0, 0.25])
-def test_posterior_is_the_exact_gp_posterior(synthetic_data, offset_std):
+@pytest.mark.parametrize("offset_std,scaled", [(0.0, False), (0.25, False), (0.25, True)])
+def test_posterior_is_the_exact_gp_posterior(synthetic_data, offset_std, scaled):
     pos, err, act = (a[:120] for a in synthetic_data)
-    settings = FitSettings(bias_std=0.3, field_std=0.15, offset_std=offset_std)
+    scale = np.linspace(0.3, 1.0, 16).reshape(8, 2) if scaled else 1.0
+    settings = FitSettings(bias_std=0.3, field_std=0.15, offset_std=offset_std, scale=scale)
     gp = LandingErrorGP(settings)
     gp.fit(pos, err, act)
     pts = np.random.default_rng(2).uniform(-2.0, 17.0, size=(9, 2))
@@ -211,6 +210,9 @@ def test_bad_data_is_rejected(pos, err, act, match):
         ({"residual_std": np.ones((3, 2))}, "residual_std"),
         ({"bias_mean": np.full((8, 2), np.nan)}, "bias_mean"),
         ({"coupled": np.ones((8, 3), bool)}, "coupled"),
+        ({"scale": 0.0}, "scale"),
+        ({"scale": np.full((8, 2), 1.5)}, "scale"),
+        ({"offset_std": -0.1}, "offset_std"),
     ],
 )
 def test_bad_settings_are_rejected(kwargs, match):
