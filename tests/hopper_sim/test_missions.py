@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopper_sim.events import Observer
 from hopper_sim.environment import EnvSettings
+from hopper_sim.events import Observer
 from hopper_sim.runner import NavigationRunner, RunnerSettings
 from planner.scenario import load_scenario, parse_scenario
 from tests.planner import ltl_oracle
