@@ -73,6 +73,10 @@ PAPER_TABLE_I: dict[tuple[float, float], tuple[float, float]] = {
 """The paper's Table I: ``(C, eps) -> (mean reward, mean steps)`` over ten runs of case (a)."""
 
 
+#: Most runs of one sweep (the seeds of all of them are drawn up front).
+MAX_RUNS = 100_000
+
+
 class SweepError(ValueError):
     """A sweep was set up with bad parameters."""
 
@@ -129,6 +133,12 @@ class SweepSpec:
             raise SweepError(f"runs must be a whole number >= 1, got {self.runs}")
         if int(self.seed) != self.seed or self.seed < 0:
             raise SweepError(f"seed must be a whole number >= 0, got {self.seed}")
+        n_runs = len(cs) * len(epss) * int(self.runs)
+        if n_runs > MAX_RUNS:
+            raise SweepError(
+                f"{len(cs)} x {len(epss)} cells x {int(self.runs)} runs = {n_runs} runs, more "
+                f"than the limit of {MAX_RUNS}"
+            )
         object.__setattr__(self, "cs", cs)
         object.__setattr__(self, "epss", epss)
         object.__setattr__(self, "runs", int(self.runs))
@@ -463,14 +473,33 @@ def _run_task(run: RunFunction, scenario: Scenario, task: SweepTask) -> SweepRow
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
-def _init_worker() -> None:
+def die_with_parent(parent: int) -> None:
+    """Make this process end when its parent (pid ``parent``) ends, also by SIGKILL: the
+    kernel sends it SIGKILL then (Linux ``PR_SET_PDEATHSIG``; elsewhere a no-op). Exits at
+    once if the parent has already gone."""
+    import sys
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig, sigkill = 1, 9
+        libc.prctl(pr_set_pdeathsig, sigkill, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+def _init_worker(parent: int | None = None) -> None:
     # Workers share the cores: one compute thread each (torch reads these when imported).
     for var in _THREAD_VARS:
         os.environ[var] = "1"
     import signal
     import sys
 
+    if parent is not None:
+        die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
     torch = sys.modules.get("torch")
     if torch is not None:
@@ -503,7 +532,9 @@ def _iter_process(
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),)
+    ) as pool:
         pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
         try:
             while pending:
@@ -511,14 +542,15 @@ def _iter_process(
                 for fut in done:
                     task = pending.pop(fut)
                     yield task, fut.result()
-        except KeyboardInterrupt:
-            # stop the runs in progress now instead of waiting for them at shutdown
+        except BaseException:
+            # interrupted (Ctrl-C, SIGTERM) or a run failed: stop the runs in progress now
+            # instead of waiting for them at shutdown (a SIGKILL of this process ends the
+            # workers through die_with_parent)
+            for fut in pending:
+                fut.cancel()
             for proc in list((getattr(pool, "_processes", None) or {}).values()):
                 proc.terminate()
             raise
-        finally:
-            for fut in pending:
-                fut.cancel()
 
 
 def _import_ray() -> Any:

@@ -393,7 +393,7 @@ class RobustQLearner:
             with np.load(io.BytesIO(unseal(data, SEAL_KIND)), allow_pickle=False) as npz:
                 arrays = {k: npz[k] for k in npz.files}
         except SealError as exc:
-            raise QTableError(f"{path}: not an intact Q-table file: {exc}") from None
+            raise QTableError(f"{path}: not a readable Q-table file: {exc}") from None
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise QTableError(f"{path}: not a readable Q-table file ({exc})") from exc
         need = ("format", "version", "q", "reward_sum", "reward_count", "state_cell", "settings")

@@ -75,7 +75,8 @@ from planner.errors import (
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
-from planner.toml_lines import key_lines, line_of
+from planner.textfile import read_text
+from planner.toml_lines import key_lines, line_of, nesting_depth
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -86,6 +87,18 @@ SHIPPED_SCENARIOS: tuple[str, ...] = ("a", "b", "c", "d")
 """Names of the case studies shipped as package data (``planner/scenarios/<name>.toml``)."""
 
 DEFAULT_FORMULA = "!Haz U Goal"
+
+#: Limits of a scenario, checked before anything of that size is built: cells of the grid,
+#: labelled regions, rectangles and cells listed per region, the magnitude of a cell's
+#: reward, propositions of the formula (the letters 2^n of its automaton), nesting depth
+#: of the TOML and the size of the file.
+MAX_CELLS = 1 << 16
+MAX_REGIONS = 64
+MAX_REGION_ITEMS = 4096
+MAX_REWARD = 1.0e6
+MAX_PROPOSITIONS = 16
+MAX_TOML_DEPTH = 32
+MAX_FILE_BYTES = 1 << 20
 _LABEL_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
@@ -124,6 +137,13 @@ class World:
                 raise ScenarioValueError(
                     f"{name} must be positive and finite, got {value}", key=key
                 )
+        cells = (self.width / self.cell) * (self.height / self.cell)
+        if not cells <= MAX_CELLS:
+            raise ScenarioValueError(
+                f"a {self.width} x {self.height} m world of {self.cell} m cells has {cells:.4g} "
+                f"cells, more than the limit of {MAX_CELLS}",
+                key="world.size",
+            )
         for name in ("width", "height"):
             n = getattr(self, name) / self.cell
             if abs(n - round(n)) > 1e-9 * max(1.0, n):
@@ -279,6 +299,11 @@ class Scenario:
         object.__setattr__(self, "regions", MappingProxyType(dict(self.regions)))
         object.__setattr__(self, "rewards", MappingProxyType(dict(self.rewards)))
         object.__setattr__(self, "start", (float(self.start[0]), float(self.start[1])))
+        if len(self.regions) > MAX_REGIONS:
+            raise ScenarioValueError(
+                f"{len(self.regions)} regions, more than the limit of {MAX_REGIONS}",
+                key="regions",
+            )
         named = [(label, f"regions.{label}") for label in self.regions]
         for label, key in [*named, (self.hazard, "hazard"), (self.goal, "goal")]:
             if not _is_proposition(label):
@@ -331,6 +356,14 @@ class Scenario:
                 raise ScenarioValueError(
                     f"reward must be finite, got {reward}", key=f"rewards.{label}"
                 )
+        big = np.flatnonzero(~(np.abs(self.reward_grid) <= MAX_REWARD).ravel())
+        if big.size:
+            i, j = divmod(int(big[0]), self.world.ny)
+            raise ScenarioValueError(
+                f"the rewards of cell ({i}, {j}) sum to {self.reward_grid[i, j]:.4g}, beyond the "
+                f"limit of +-{MAX_REWARD:g}",
+                key="rewards",
+            )
         if not 0.0 < self.p_sat <= 1.0:
             raise ScenarioValueError(f"must be in (0, 1], got {self.p_sat}", key="p_sat")
         self._check_formula()
@@ -344,6 +377,12 @@ class Scenario:
 
     def _check_region(self, region: Region, key: str) -> None:
         w = self.world
+        for what, items in (("rects", region.rects), ("cells", region.cells)):
+            if len(items) > MAX_REGION_ITEMS:
+                raise ScenarioValueError(
+                    f"{len(items)} {what}, more than the limit of {MAX_REGION_ITEMS} per region",
+                    key=f"{key}.{what}",
+                )
         for k, (x0, y0, x1, y1) in enumerate(region.rects):
             if not (x0 < x1 and y0 < y1):
                 raise ScenarioValueError(
@@ -374,6 +413,12 @@ class Scenario:
             ) from err
         # A hazard or goal label that names no region and is not in the formula is a typo.
         atoms = parsed.propositions()
+        if len(atoms) > MAX_PROPOSITIONS:
+            raise ScenarioFormulaError(
+                f"the formula uses {len(atoms)} propositions, more than the limit of "
+                f"{MAX_PROPOSITIONS} (its automaton reads 2^n letters)",
+                key="formula",
+            )
         for key, label in (("hazard", self.hazard), ("goal", self.goal)):
             if label not in self.regions and label not in atoms:
                 close = difflib.get_close_matches(label, [*self.regions, *sorted(atoms)], n=1)
@@ -647,6 +692,13 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         ScenarioSyntaxError: the text is not TOML (line from tomllib's message).
         ScenarioError: any other problem (a subclass), located at the key's line.
     """
+    depth, line = nesting_depth(text)
+    if depth > MAX_TOML_DEPTH:
+        raise ScenarioSyntaxError(
+            f"arrays or tables nested {depth} deep, more than the limit of {MAX_TOML_DEPTH}",
+            line=line,
+            source=source,
+        )
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -690,10 +742,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         ScenarioError: a subclass naming the problem, the key and the line.
     """
     path = resolve_scenario_path(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ScenarioError(f"cannot read scenario file: {err}", source=str(path)) from err
+    text = read_text(path, ScenarioError, MAX_FILE_BYTES)
     return parse_scenario(text, source=str(path))
 
 

@@ -43,7 +43,7 @@ def read_text(path: str | os.PathLike[str], error: type[Exception], limit: int) 
                 raise error(f"{path}: the file holds {size} bytes, more than the limit of {limit}")
             data = f.read(limit + 1)
     except OSError as err:
-        raise error(f"{path}: cannot be read ({err.strerror or err})") from None
+        raise error(f"{path}: cannot read: {err.strerror or err}") from None
     if len(data) > limit:
         raise error(f"{path}: the file holds more than the limit of {limit} bytes")
     return decode(data, path, error)

@@ -364,7 +364,13 @@ def test_command_writes_table_and_json(tmp_path, monkeypatch, capsys):
     assert record["files"]["rows"] == str(out / sf.ROWS_FILE)
     assert len(read_rows_csv(out / sf.ROWS_FILE)) == 4
 
-    assert hopnav(args) == 0
+    # another sweep into the folder of this one is refused (nothing touched) unless --force
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert hopnav(args) == 2
+    err = capsys.readouterr().err
+    assert "holds the results of a sweep" in err and len(err.strip().splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert hopnav([*args, "--force"]) == 0
     text = capsys.readouterr().out
     assert "P_RL,ee = C" in text and "[paper 139.75/83]" in text
     assert len(read_rows_csv(out / sf.ROWS_FILE)) == 18
@@ -436,7 +442,7 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     assert hopnav([*args, "--resume"]) == 0
     resumed = json.loads(capsys.readouterr().out)
     assert len(calls) == 2
-    assert hopnav(args) == 0  # from scratch
+    assert hopnav([*args, "--force"]) == 0  # from scratch
     fresh = json.loads(capsys.readouterr().out)
     assert resumed["rows"] == fresh["rows"] and resumed["cells"] == fresh["cells"]
 
