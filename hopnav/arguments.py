@@ -56,6 +56,23 @@ def at_least(minimum: int, why: str = "") -> Callable[[str], int]:
     return parse
 
 
+def int_range(minimum: int, maximum: int, what: str = "") -> Callable[[str], int]:
+    """A whole number in ``[minimum, maximum]`` (an upper bound on an input-sized
+    resource); ``what`` names the resource in the message."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if not minimum <= value <= maximum:
+            reason = f" ({what})" if what else ""
+            raise argparse.ArgumentTypeError(
+                f"must be a whole number in [{minimum}, {maximum}]{reason}, got {value}"
+            )
+        return value
+
+    parse.__name__ = f"int_range_{minimum}_{maximum}"
+    return parse
+
+
 def positive_float(text: str) -> float:
     """A finite number > 0."""
     try:

@@ -53,6 +53,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--format", choices=FORMATS, help="input format (default: suffix)")
     e.add_argument("--to", choices=FORMATS, help="output format (default: suffix)")
     e.add_argument("--target", action="append", help="bmdp: labels of the terminal states")
+    e.add_argument(
+        "--force",
+        action="store_true",
+        help="prism: also replace a .lab file that belongs to no .tra of that name",
+    )
     e.set_defaults(func=run_export, prog=e.prog)
 
 
@@ -138,7 +143,13 @@ def run_export(args: argparse.Namespace) -> int:
     to = model_format(args.out, args.to, "--to")
     output_file(args.out, "--out")
     if to == "prism":  # PRISM's explicit format is two files, the .tra and the .lab
-        output_file(Path(args.out).with_suffix(".lab"), "--out (its .lab file)")
+        lab = Path(args.out).with_suffix(".lab")
+        output_file(lab, "--out (its .lab file)")
+        if lab.exists() and not Path(args.out).exists() and not args.force:
+            raise UsageError(
+                f"--out {args.out}: writing it would replace {lab}, which belongs to no "
+                f"{Path(args.out).name}; remove it, choose another --out, or add --force"
+            )
     if args.scenario is None:
         fmt = model_format(args.file, args.format, "--format")
         input_file(args.file, "model file")
