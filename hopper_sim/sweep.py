@@ -530,27 +530,46 @@ def _iter_process(
     run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask], workers: int
 ) -> Iterator[tuple[SweepTask, SweepRow]]:
     import multiprocessing
+    import signal
+    import threading
 
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),)
-    ) as pool:
-        pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
+    pool: ProcessPoolExecutor | None = None
+    pending: dict = {}
+    # The workers (and multiprocessing's resource tracker) are started with SIGINT ignored,
+    # which they keep from their first instruction: a Ctrl-C reaches the whole process
+    # group, and is the parent's alone to handle (no worker prints a traceback).
+    main = threading.current_thread() is threading.main_thread()
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
         try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    task = pending.pop(fut)
-                    yield task, fut.result()
-        except BaseException:
-            # interrupted (Ctrl-C, SIGTERM) or a run failed: stop the runs in progress now
-            # instead of waiting for them at shutdown (a SIGKILL of this process ends the
-            # workers through die_with_parent)
-            for fut in pending:
-                fut.cancel()
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                proc.terminate()
-            raise
+            pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=ctx,
+                initializer=_init_worker,
+                initargs=(os.getpid(),),
+            )
+            pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, previous)
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                task = pending.pop(fut)
+                yield task, fut.result()
+    except BaseException:
+        # interrupted (Ctrl-C, SIGTERM), a run failed or the consumer stopped: end the runs
+        # in progress now instead of waiting for them (a SIGKILL of this process ends the
+        # workers through die_with_parent)
+        for fut in pending:
+            fut.cancel()
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        raise
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _import_ray() -> Any:

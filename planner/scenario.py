@@ -490,8 +490,9 @@ class Scenario:
     def reward_grid(self) -> np.ndarray:
         """Reward per cell, ``(nx, ny)`` float: the sum of the rewards of the cell's labels."""
         grid = np.zeros((self.world.nx, self.world.ny))
-        for label, reward in self.rewards.items():
-            grid += reward * self.region_mask(label)
+        with np.errstate(over="ignore"):  # a sum beyond the floats is refused by the caller
+            for label, reward in self.rewards.items():
+                grid += reward * self.region_mask(label)
         grid.flags.writeable = False
         return grid
 

@@ -95,6 +95,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _kept(finished: list, rows: Path) -> str:
+    if not finished:
+        return "no run had finished; add --resume to start where it stopped"
+    return f"the {len(finished)} finished runs are in {rows}; add --resume to run only the others"
+
+
 def grid_record(spec: Any) -> dict[str, Any]:
     """The grid of a sweep as recorded in ``sweep_meta.json`` (what ``--resume`` must match)."""
     return {"cs": list(spec.cs), "epss": list(spec.epss), "runs": spec.runs, "seed": spec.seed}
@@ -204,15 +210,9 @@ def run(args: argparse.Namespace) -> int:
     except (SweepBackendError, SweepError) as err:
         raise UsageError(str(err)) from None
     except SweepRunError as err:
-        raise RunFailed(
-            f"{err}; the {len(finished)} finished runs are in {out / ROWS_FILE}; after a fix, "
-            "add --resume to run only the others"
-        ) from None
+        raise RunFailed(f"{err}; {_kept(finished, out / ROWS_FILE)}, after a fix") from None
     except KeyboardInterrupt:
-        raise RunFailed(
-            f"interrupted; the {len(finished)} finished runs are in {out / ROWS_FILE}; add "
-            "--resume to run only the others"
-        ) from None
+        raise RunFailed(f"interrupted; {_kept(finished, out / ROWS_FILE)}") from None
     finally:
         bar.close()
     paths = write_outputs(result, args.out, prov)
