@@ -28,7 +28,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -394,7 +393,7 @@ class RobustQLearner:
                 arrays = {k: npz[k] for k in npz.files}
         except SealError as exc:
             raise QTableError(f"{path}: not a readable Q-table file: {exc}") from None
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        except Exception as exc:  # zipfile and numpy raise many types for a damaged payload
             raise QTableError(f"{path}: not a readable Q-table file ({exc})") from exc
         need = ("format", "version", "q", "reward_sum", "reward_count", "state_cell", "settings")
         missing = [k for k in need if k not in arrays]

@@ -706,6 +706,8 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         match = re.search(r"line (\d+)", str(err))
         line = int(match.group(1)) if match else getattr(err, "lineno", None)
         raise ScenarioSyntaxError(f"malformed TOML: {err}", line=line, source=source) from err
+    except ValueError as err:  # tomllib's int() of a number with thousands of digits
+        raise ScenarioSyntaxError(f"malformed TOML: {err}", source=source) from None
     try:
         return scenario_from_dict(data)
     except ScenarioError as err:
