@@ -172,5 +172,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_command(args)
 
 
+def entry() -> int:
+    """The console script: :func:`main`, then Ctrl-C is ignored while Python shuts down (the
+    command has finished and said so; unloading torch takes a second, and an interrupt then
+    would end the process without a word)."""
+    try:
+        code = main()
+    except KeyboardInterrupt:  # between the command's end and the line below
+        _say("hopnav", "interrupted")
+        code = EXIT_FAILED
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

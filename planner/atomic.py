@@ -39,7 +39,7 @@ def temporary_name(path: str | os.PathLike[str]) -> Path:
 
 def _owner_alive(name: str, stem: str) -> bool:
     """Whether the process that created temporary ``name`` (of target ``stem``) runs."""
-    middle = name[len(stem) + 2 : -len(_SUFFIX)]  # "PID.RANDOM"
+    middle = name[len(stem) + 1 : -len(_SUFFIX)]  # "PID.RANDOM"
     pid_text, _, rest = middle.partition(".")
     if not pid_text.isdigit() or not rest:
         return True  # not one of ours: leave it alone

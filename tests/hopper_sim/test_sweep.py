@@ -463,6 +463,32 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     assert len(err.strip().splitlines()) == 1
 
 
+def test_resume_refuses_another_grid_seed_runs_or_scenario(tmp_path, monkeypatch, capsys):
+    """A resume that would rewrite the rows of another sweep is refused with one line and
+    touches nothing; the same sweep resumes (nothing to run)."""
+    monkeypatch.setattr(sw, "default_run_function", lambda: fake_run)
+    out = tmp_path / "sweep"
+    base = ["sweep", "--backend", "serial", "--out", str(out), "--json"]
+    grid = ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "2", "--seed", "3"]
+    assert hopnav([*base, *grid]) == 0
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    other = resolve_scenario_path("b")
+    for change in (
+        ["--cs", "0.25", "--epss", "0.005", "--runs", "2", "--seed", "3"],  # grid
+        ["--cs", "0.25,0.75", "--epss", "0.005,0.0075", "--runs", "2", "--seed", "3"],
+        ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "2", "--seed", "4"],  # seed
+        ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "3", "--seed", "3"],  # runs
+        [*grid, "--scenario", str(other)],  # scenario
+    ):
+        assert hopnav([*base, *change, "--resume"]) == 2, change
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "cannot resume" in err, err
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert hopnav([*base, *grid, "--resume"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["rows"]) == 4
+
+
 def test_default_run_function_needs_the_runner(monkeypatch):
     monkeypatch.setitem(sys.modules, "hopper_sim.runner", None)  # as if not installed
     with pytest.raises(SweepBackendError, match=r"hopper_sim\.runner is not available"):
