@@ -62,11 +62,11 @@ def int_range(minimum: int, maximum: int, what: str = "") -> Callable[[str], int
 
     def parse(text: str) -> int:
         value = _integer(text)
-        if not minimum <= value <= maximum:
-            reason = f" ({what})" if what else ""
-            raise argparse.ArgumentTypeError(
-                f"must be a whole number in [{minimum}, {maximum}]{reason}, got {value}"
-            )
+        reason = f" ({what})" if what else ""
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}{reason}, got {value}")
+        if value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}{reason}, got {value}")
         return value
 
     parse.__name__ = f"int_range_{minimum}_{maximum}"
