@@ -46,7 +46,7 @@ def main() -> int:
 
     learning_loop.resynthesise = recording
     loop_args = argparse.Namespace(beta=None, candidates="accepting", batch=50, cap=51)
-    learning_loop.run_once(args.seed, loop_args, LandingErrorGP(seed=args.seed))
+    learning_loop.run_once(args.seed, loop_args, LandingErrorGP(learning_loop.prior()))
     r = seen[1]
     product = r.product
     spec = Specification(ReachAvoid(product.accepting_states()))

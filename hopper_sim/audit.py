@@ -3,22 +3,25 @@
 Procedure (issue "learning", acceptance), sampling hops the way the navigation loop makes them:
 
 1. One navigation run of the scenario collects departure positions, landing errors (relative
-   to the target of the *executed* action, as the runner records them) and the interstitial
-   velocities the hopper had at its departures (:func:`collect_run_data`).
-2. One re-synthesis on that data (:func:`planner.learning.resynthesise`, the runner's
-   settings) fits the landing-error GPs and gives the transition intervals exactly as the loop
-   computes them, and the nonviolating sub-model the loop would plan with.
+   to the target of the *executed* action, as the runner records them), the executed actions
+   and the interstitial velocities the hopper had at its departures (:func:`collect_run_data`);
+   further runs (other seeds) add their departure velocities to the pool the audit draws from
+   (:func:`pool_velocities`).
+2. One re-synthesis on the first run's data (:func:`planner.learning.resynthesise`, the
+   runner's settings) fits the landing-error model and gives the transition intervals exactly
+   as the loop computes them, and the sub-models the loop would plan with.
 3. Start states: a uniformly random point of the pair's cell and a velocity drawn uniformly
-   from the run's departure velocities. At each start state the controller decides as it does
-   in the loop (:meth:`hopper_sim.environment.HopperGridEnv.step`): the audited action is
+   from the pooled departure velocities. At each start state the controller decides as it
+   does in the loop (:meth:`hopper_sim.environment.HopperGridEnv.step`): the audited action is
    requested, and its backup switch may execute instead the cheapest action of the *loop's
-   allowed set* of that cell (:func:`loop_allowed_actions`: the nonviolating sub-model's
-   actions in the product state in which a run entering the cell is; all enabled actions where
-   that state has none, as in the policy's fallback phase), to which the requested action is
-   added (the controller needs the request among its choices). The hop is simulated in MuJoCo
-   with the world's terrain field, fresh landing noise and the stance thrust, and counts for
-   the pair of the action it **executed** (if that pair is audited and not yet full) — so a
-   hop requested for one pair may fill another, as in the loop.
+   allowed set* of that cell (:func:`loop_allowed_actions`: in the product state in which a
+   run entering the cell is, the goal plan's actions where the worst-case satisfaction
+   probability exceeds ``P_sat`` (the goal-reaching phase), else the nonviolating sub-model's
+   actions (exploration), else all enabled actions (the fallback phase)), to which the
+   requested action is added (the controller needs the request among its choices). The hop
+   is simulated in MuJoCo with the world's terrain field, fresh landing noise and the stance
+   thrust, and counts for the pair of the action it **executed** (if that pair is audited and
+   not yet full) — so a hop requested for one pair may fill another, as in the loop.
 4. Drawing goes on in rounds until every audited pair has ``samples`` executed, successful
    hops, or until the pair's own requests reach ``attempts * samples`` (the attempt cap).
    Pairs left short are reported (:attr:`SampledAudit.executed`): the controller rarely or
@@ -37,17 +40,18 @@ so that they are reported rather than hidden by the margin.
 
 What the audit claims when it passes: for the audited pairs, the intervals of ``(cell, a)``
 contain (up to the binomial margin) the successor distribution of hops that depart from a
-uniform point of the cell with a velocity of the run's distribution and that **execute**
-``a`` under the loop's controller and allowed set. That is the distribution the abstraction's
-intervals stand for in the loop, where the policy's request can be replaced by the backup. It
-says nothing about hops the controller would not execute (forced reversals against the
-incoming velocity), and the departure velocities are those of one run, not of every run.
+uniform point of the cell with a velocity drawn from several runs' departures and that
+**execute** ``a`` under the loop's controller and allowed set. That is the distribution the
+abstraction's intervals stand for in the loop, where the policy's request can be replaced by
+the backup. It says nothing about hops the controller would not execute (forced reversals
+against the incoming velocity), nor about a cell whose departure velocities in a run differ
+from the pooled ones (the velocity at a departure is drawn independently of the cell).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,11 +72,12 @@ from planner.torch_threads import torch_threads
 
 @dataclass(frozen=True)
 class RunData:
-    """Departure positions (N, 2) [m], landing errors (N, 2) [m] and the interstitial
-    velocities (M, 3) [m/s] the hopper had at its departures."""
+    """Departure positions (N, 2) [m], landing errors (N, 2) [m], executed actions (N,) and
+    the interstitial velocities (M, 3) [m/s] the hopper had at its departures."""
 
     positions: np.ndarray
     errors: np.ndarray
+    actions: np.ndarray
     velocities: np.ndarray
 
 
@@ -81,11 +86,13 @@ class _Collector(Observer):
         self.env = env
         self.pos: list[np.ndarray] = []
         self.err: list[np.ndarray] = []
+        self.act: list[int] = []
         self.vel: list[np.ndarray] = [env.controller.steady.velocity.copy()]
 
     def on_hop(self, event: HopEvent) -> None:
         self.pos.append(np.array(event.start_pos))
         self.err.append(np.array(event.landing) - np.array(event.target))
+        self.act.append(ACTIONS.index(event.executed_action))
         self.vel.append(self.env.vel.copy())
 
 
@@ -102,21 +109,32 @@ def collect_run_data(runner: NavigationRunner, seed: int) -> RunData:
     return RunData(
         np.array(collector.pos).reshape(-1, 2),
         np.array(collector.err).reshape(-1, 2),
+        np.array(collector.act, dtype=np.int64),
         vel if len(vel) else np.array(collector.vel).reshape(-1, 3),
     )
 
 
-def loop_allowed_actions(res: Resynthesis, grid: GridWorld) -> np.ndarray:
+def pool_velocities(runner: NavigationRunner, data: RunData, seeds: list[int]) -> RunData:
+    """``data`` with the departure velocities of the runs ``seeds`` added to its own."""
+    more = [collect_run_data(runner, int(s)).velocities for s in seeds]
+    return replace(data, velocities=np.vstack([data.velocities, *more]))
+
+
+def loop_allowed_actions(res: Resynthesis, grid: GridWorld, p_sat: float) -> np.ndarray:
     """``(n_cells, n_actions)`` mask: the actions the loop lets the controller choose from in
-    each cell, for the synthesis ``res``: the nonviolating sub-model's allowed actions in the
-    product state :meth:`~planner.imdp.product.ProductIMDP.entry_state` of the cell (for
-    ``!Haz U Goal`` the state of every unfinished run there), or every enabled action where
-    that state has none (the policy's fallback phase)."""
+    each cell, for the synthesis ``res``, in the product state
+    :meth:`~planner.imdp.product.ProductIMDP.entry_state` of the cell (for ``!Haz U Goal`` the
+    state of every unfinished run there): the goal plan's actions where the worst-case
+    satisfaction probability exceeds ``p_sat`` (goal reaching), else the nonviolating
+    sub-model's (exploration), else every enabled action (the policy's fallback phase)."""
     cells = np.arange(grid.n_cells)
     ps = np.array([res.product.entry_state(int(c)) for c in cells], dtype=np.int64)
-    nv = np.asarray(res.nonviolating.actions, dtype=bool)[ps]
     enabled = grid.enabled[: grid.n_cells]
-    return np.where(nv.any(axis=1, keepdims=True), nv & enabled, enabled)
+    nv = np.asarray(res.nonviolating.actions, dtype=bool)[ps] & enabled
+    goal = np.asarray(res.goal.allowed, dtype=bool)[ps] & enabled
+    use_goal = (res.satisfaction.values[ps] > p_sat) & goal.any(axis=1)
+    explore = np.where(nv.any(axis=1, keepdims=True), nv, enabled)
+    return np.where(use_goal[:, None], goal, explore)
 
 
 @dataclass(frozen=True)
@@ -195,16 +213,17 @@ def audit_intervals(
         raise ValueError("each (cell, action) pair may be audited only once")
     with torch_threads(settings.torch_threads):
         res = resynthesise(
-            LandingErrorGP(settings.gp, seed=0),
+            LandingErrorGP(runner.gp_settings),
             grid,
             runner.automaton,
             data.positions,
             data.errors,
+            actions=data.actions,
             reward=env.reward_table,
             initial_cell=runner.scenario.start_cell,
             settings=runner.synthesis_settings,
         )
-    allowed = loop_allowed_actions(res, grid)
+    allowed = loop_allowed_actions(res, grid, runner.scenario.p_sat)
     energy = nominal_energy(env.model, env.controller.steady.speed)
 
     executed = np.zeros(n_pairs, dtype=np.int64)

@@ -23,9 +23,12 @@ regulates the energy to that of steady hopping.
 
 Observation: the interstitial state, ``{"pos": (2,) m, "vel": (3,) m/s, "cell": int}``, the
 cell a flat index ``i * ny + j`` (``nx * ny`` = off the map). Reward: the scenario's reward of
-the cell landed in (``W``, collected on landing). ``terminated`` when the hopper lands in a
-hazard cell or off the map, or a hop fails (the hopper fell: ``info["step"].hop.status`` says
-why); reaching the goal is the task's business (the automaton), not the environment's.
+the cell landed in (``W``), paid as the scenario's ``collect`` says: with ``"once"`` only on the
+episode's first landing in that cell, with ``"every"`` on every landing
+(:attr:`HopperGridEnv.collected` marks the cells landed in so far, ``info["first_landing"]``
+whether this landing was the episode's first in its cell). ``terminated`` when the hopper lands
+in a hazard cell or off the map, or a hop fails (the hopper fell: ``info["step"].hop.status``
+says why); reaching the goal is the task's business (the automaton), not the environment's.
 ``truncated`` when the episode reaches ``max_steps`` hops (default: the scenario's step cap)
 without terminating. ``info["action_mask"]`` (``int8``, one per action) marks the actions
 whose target cell lies inside the world from the current cell (the abstraction's enabled
@@ -173,6 +176,8 @@ class HopperGridEnv(_EnvBase):
         )
         self.reward_table = np.append(np.asarray(scenario.reward_grid, float).ravel(), 0.0)
         self.hazard_cells = self.grid.label_mask(scenario.hazard)
+        self.collected = np.zeros(self.grid.n_states, dtype=bool)
+        """Cells landed in during this episode (the start cell is not a landing)."""
         self._energy = nominal_energy(self.model, controller.steady.speed)
         self._data = self.model.make_data()
         self._rng: np.random.Generator | None = None
@@ -243,6 +248,7 @@ class HopperGridEnv(_EnvBase):
             self._rng = np.random.default_rng(seed)
         self.pos = pos.copy()
         self.vel = self.controller.steady.velocity.copy()
+        self.collected[:] = False
         self._done = False
         self._steps = 0
         return self.observation(), {"action_mask": self.action_mask()}
@@ -308,12 +314,15 @@ class HopperGridEnv(_EnvBase):
                 0.0,
                 True,
                 False,
-                {"step": info, "outcome": "fell", "action_mask": mask},
+                {"step": info, "outcome": "fell", "action_mask": mask, "first_landing": False},
             )
         self.pos = np.asarray(hop.next_pos, dtype=float).copy()
         self.vel = np.asarray(hop.next_vel, dtype=float).copy()
         landed = self.cell
-        reward = float(self.reward_table[landed])
+        first = not self.collected[landed]
+        self.collected[landed] = True
+        paid = first or self.scenario.collect == "every"
+        reward = float(self.reward_table[landed]) if paid else 0.0
         hazard = bool(self.hazard_cells[landed])
         truncated = not hazard and self._steps >= self.max_steps
         self._done = hazard or truncated
@@ -327,5 +336,6 @@ class HopperGridEnv(_EnvBase):
                 "step": info,
                 "outcome": "hazard" if hazard else None,
                 "action_mask": self.action_mask(landed),
+                "first_landing": first,
             },
         )

@@ -132,6 +132,35 @@ class HopEvent:
 
 
 @dataclass(frozen=True)
+class ResynthesisRecord:
+    """What one (re-)synthesis of a run found, for reports.
+
+    Attributes:
+        step: hops done in the run when it ran (0 for the initial synthesis).
+        p_worst_current: worst-case satisfaction probability ``P̌`` of the run's current
+            product state under this synthesis (the number the switch compares with P_sat).
+        p_worst_initial: ``P̌`` of the initial product state.
+        num_data: hops the GPs were fitted on.
+        gp: the landing-error model's report of this fit
+            (:class:`~planner.gp.landing.FitReport`): every numeric field but ``num_data``
+            (its hyperparameters and what it estimated), flattened to a tuple of floats;
+            a field with a non-finite value (e.g. the loss of a fit without data) is left out.
+        mec_states: states of the end component exploration steers to (0: none).
+        mec_probability: worst-case probability of reaching it from the current state.
+        mec_average_reward: its average reward still to be collected.
+    """
+
+    step: int
+    p_worst_current: float
+    p_worst_initial: float
+    num_data: int
+    gp: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    mec_states: int = 0
+    mec_probability: float | None = None
+    mec_average_reward: float | None = None
+
+
+@dataclass(frozen=True)
 class SynthesisEvent:
     """The GPs were refitted and the strategy re-synthesised.
 
@@ -144,6 +173,7 @@ class SynthesisEvent:
         gp_std: ``(Gx, Gy, 2)`` posterior standard deviation of the landing error, m.
         p_worst_initial: worst-case satisfaction probability of the initial product state.
         timings: wall-clock seconds per stage (e.g. ``{"gp_fit": 0.8, "imdp": 0.1}``).
+        record: the synthesis's report (current ``P̌``, GP hyperparameters, chosen MEC).
     """
 
     run_index: int
@@ -154,6 +184,7 @@ class SynthesisEvent:
     gp_std: np.ndarray
     p_worst_initial: float
     timings: dict[str, float] = field(default_factory=dict)
+    record: ResynthesisRecord | None = None
 
     def __post_init__(self) -> None:
         gx = _as_array("grid_x", self.grid_x, (None,))
@@ -186,6 +217,9 @@ class RunEnd:
             (its state had no action in that plan's satisfying sub-model; the policy went back
             to exploration), or ``None`` if it never did: only a run with ``None`` here was
             held to the guarantee ``p_switch`` to the end (:mod:`planner.policy`).
+        resyntheses: one :class:`ResynthesisRecord` per synthesis of the run, in order.
+        collections: cells whose reward the run collected (first landings in a cell with a
+            nonzero reward), whatever the scenario's ``collect``.
     """
 
     run_index: int
@@ -199,9 +233,16 @@ class RunEnd:
     timings: dict[str, float] = field(default_factory=dict)
     reason: str = ""
     left_plan_step: int | None = None
+    resyntheses: tuple[ResynthesisRecord, ...] = ()
+    collections: int = 0
 
     def __post_init__(self) -> None:
         _check_choice("outcome", self.outcome, OUTCOMES)
+
+    @property
+    def p_worst_trace(self) -> tuple[float, ...]:
+        """``P̌`` at the current state after each synthesis, in order."""
+        return tuple(r.p_worst_current for r in self.resyntheses)
 
 
 @runtime_checkable

@@ -61,12 +61,23 @@ Entity paths::
     run_K/plots/p_worst          Scalars       worst-case satisfaction probability (P-check) of
                                                the current product state, after each hop
     run_K/plots/p_worst_initial  Scalars       of the initial state, at each synthesis
+    run_K/plots/p_worst_current  Scalars       of the current state, at each synthesis (the
+                                               number the switch compares with P_sat)
     run_K/plots/total_reward     Scalars       reward collected so far
     run_K/plots/reward           Scalars       reward of the hop
     run_K/plots/phase            Scalars       0 exploration, 1 goal reaching, 2 fallback
     run_K/plots/rl_action        Scalars       1 if the RL policy chose the action
     run_K/plots/backup           Scalars       1 if the backup switch replaced the action
+    run_K/synthesis/num_data     Scalars       hops the GPs were fitted on, at each synthesis
+    run_K/synthesis/mec_states   Scalars       states of the end component exploration steers
+                                               to (0: none), at each synthesis
+    run_K/synthesis/mec_probability, synthesis/mec_average_reward
+                                 Scalars       its worst-case reach probability from the
+                                               current state and its average reward still to
+                                               be collected (absent when there is none)
     run_K/synthesis/<field>      Scalars       any new numeric field of SynthesisEvent
+    run_K/gp/fit/<name>          Scalars       the fit report's numeric values (one series
+                                               per component, e.g. per axis), at each synthesis
     run_K/gp/mean, gp/std        Tensor        GP posterior mean / std of the landing error,
                                                (Gx, Gy, 2) m, at each synthesis
     run_K/gp/image/<m>_<axis>    Image         the same as colour maps (mean: purple-orange in
@@ -74,9 +85,11 @@ Entity paths::
                                                saturated beyond; x right, y up)
     run_K/gp/mean_field          Arrows3D      GP mean error as arrows at the grid points
     run_K/timings/<stage>        Scalars       wall-clock seconds per synthesis stage
-    run_K/outcome                TextDocument  outcome at the end of the run
+    run_K/outcome                TextDocument  outcome at the end of the run, with P-check at
+                                               the current state after each synthesis
     run_K/summary                AnyValues     outcome, reason, steps, reward, switch_step,
-                                               p_switch, left_plan_step, backups, seconds,
+                                               p_switch, left_plan_step, backups, collections,
+                                               seconds,
                                                timing_<stage> (+ any new scalar field)
 
 The blueprint (:func:`blueprint`) is sent on close: one tab per run with the 3D world large on
@@ -118,6 +131,7 @@ from hopper_sim.styles import (
 from planner.atomic import new_temporary_folder
 
 if TYPE_CHECKING:
+    from hopper_sim.events import ResynthesisRecord
     from planner.scenario import Scenario
 
 APPLICATION_ID = "hopnav"
@@ -595,6 +609,8 @@ class RerunRecorder(Observer):
             rr.Arrows3D(origins=origins, vectors=vectors, colors=[(30, 90, 200)], radii=[0.01]),
         )
         rec.log(f"{base}/plots/p_worst_initial", rr.Scalars(float(event.p_worst_initial)))
+        if event.record is not None:
+            self._log_record(base, event.record)
         for stage, seconds in event.timings.items():
             rec.log(f"{base}/timings/{stage}", rr.Scalars(float(seconds)))
         extra: dict[str, Any] = {}
@@ -609,6 +625,18 @@ class RerunRecorder(Observer):
                 extra[name] = value if _scalar(value) else json.dumps(_jsonable(value))
         if extra:
             rec.log(f"{base}/synthesis", rr.AnyValues(**extra))
+
+    def _log_record(self, base: str, record: ResynthesisRecord) -> None:
+        """The synthesis's report: ``P̌`` of the current state (beside the initial one's),
+        the fit's numeric values and the chosen end component, each a time series."""
+        rec = self._rec
+        rec.log(f"{base}/plots/p_worst_current", rr.Scalars(float(record.p_worst_current)))
+        for name in ("num_data", "mec_states", "mec_probability", "mec_average_reward"):
+            value = getattr(record, name)
+            if value is not None:
+                rec.log(f"{base}/synthesis/{name}", rr.Scalars(float(value)))
+        for name, values in record.gp.items():
+            rec.log(f"{base}/gp/fit/{name}", rr.Scalars(np.asarray(values, dtype=float)))
 
     def on_run_end(self, event: RunEnd) -> None:
         """Log the outcome text and the run's summary record."""
@@ -625,13 +653,22 @@ class RerunRecorder(Observer):
         reason = getattr(event, "reason", "")
         left = getattr(event, "left_plan_step", None)
         left_text = "" if left is None else f"; left the switch's plan at hop {left + 1}"
+        records = getattr(event, "resyntheses", ())
+        trace = (
+            "\nP-check at the current state after each synthesis (hop: P): "
+            + ", ".join(f"{r.step}: {r.p_worst_current:.3f}" for r in records)
+            + ".\n"
+            if records
+            else ""
+        )
         rec.log(
             f"{base}/outcome",
             rr.TextDocument(
                 f"# Run {k + 1}: {event.outcome}\n\n"
                 f"{reason or event.outcome} after {event.steps} hops "
                 f"({self._clock.get(k, 0.0):.2f} s simulated, {event.seconds:.1f} s wall); "
-                f"reward {event.reward:g}; {switch}{left_text}; {event.backups} backups.\n",
+                f"reward {event.reward:g}; {switch}{left_text}; {event.backups} backups.\n"
+                f"{trace}",
                 media_type="text/markdown",
             ),
         )
@@ -652,6 +689,7 @@ class RerunRecorder(Observer):
                 p_switch=None if event.p_switch is None else float(event.p_switch),
                 left_plan_step=None if left is None else int(left),
                 backups=int(event.backups),
+                collections=int(getattr(event, "collections", 0)),
                 seconds=float(event.seconds),
                 sim_seconds=float(self._clock.get(k, 0.0)),
                 **timings,

@@ -97,7 +97,12 @@ def blueprint(runs: list[int], *, timeline: str = "sim_time"):
             name="GP maps",
         )
         right = rrb.Vertical(
-            series(k, ["p_worst", "p_worst_initial"], "P-check (worst-case satisfaction)", (0, 1)),
+            series(
+                k,
+                ["p_worst", "p_worst_current", "p_worst_initial"],
+                "P-check (worst-case satisfaction)",
+                (0, 1),
+            ),
             series(k, ["total_reward", "reward"], "reward"),
             series(k, ["phase"], "phase (0 explore, 1 goal, 2 fallback)", (-0.1, 2.1)),
             series(k, ["rl_action"], "RL action", (-0.1, 1.1)),

@@ -6,13 +6,19 @@ One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"
    the MT-PIMDP with the automaton of the scenario's formula and the reward, and the policies
    are synthesised (:func:`planner.learning.resynthesise`).
 2. Every hop, the :class:`~planner.policy.SwitchingPolicy` picks an action in the current
-   product state (exploration towards the chosen MEC or goal reaching, LTL or RL, only among
-   the allowed actions of the nonviolating or satisfying sub-model); the environment
+   product state (exploration: towards the chosen MEC and through it, see
+   :mod:`planner.tour`; or goal reaching; LTL or RL, only among the allowed actions of the
+   nonviolating or satisfying sub-model); the environment
    (:class:`~hopper_sim.environment.HopperGridEnv`) turns it into touchdown angles (with the
    controller's backup switch among the same allowed actions) and hops in MuJoCo with the
    terrain field, noise and thrust; the departure position and the landing error
-   ``landing - target`` are recorded; the automaton reads the label of the cell landed in.
-3. After every ``batch_size`` hops the GPs are refitted on all data of the run and the
+   ``landing - target`` (relative to the executed action's target) and the executed action
+   are recorded for the landing-error model; the automaton reads the label of the cell
+   landed in; the reward is paid as the scenario's ``collect`` says. Where cells pay once, a
+   first landing in a cell with a (known or believed) nonzero reward re-solves the reward plan
+   with that cell at 0 (:func:`planner.learning.replan_reward`, timed as ``replan``).
+3. After every ``batch_size`` hops the landing-error model (its prior derived from the
+   scene, :func:`hopper_sim.error_prior.error_prior`) is refitted on all data of the run and the
    abstraction and policies re-synthesised. After the switch to goal reaching the data are
    still recorded and the model re-synthesised, but the goal-reaching plan of the switch is
    kept (:class:`~planner.policy.SwitchingPolicy`, ``keep_goal_plan``): the reported
@@ -37,17 +43,25 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
-from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
+from hopper_sim.error_prior import error_prior
+from hopper_sim.events import (
+    HopEvent,
+    Observer,
+    ResynthesisRecord,
+    RunEnd,
+    RunStart,
+    SynthesisEvent,
+)
 from planner.automaton import RabinAutomaton
 from planner.gp.landing import FitSettings, LandingErrorGP
 from planner.imdp.grid import ACTIONS
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import Resynthesis, ResynthesisSettings, resynthesise
+from planner.learning import Resynthesis, ResynthesisSettings, replan_reward, resynthesise
 from planner.ltl.translate import translate
 from planner.policy import SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
@@ -61,31 +75,39 @@ class RunnerSettings:
 
     Attributes:
         env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
-        delta: the interval confidence parameter (intervals hold with probability >= 1 -
-            delta under the GP model, see :mod:`planner.intervals`).
+        delta: the interval confidence parameter (a run of up to 100 hops after the switch
+            keeps its hops' errors inside their intervals with probability >= 1 - delta under
+            the landing-error model, see :mod:`planner.intervals`).
+        beta: the interval multiplier instead of the one ``delta`` gives (``None``: from
+            ``delta``); an override for studies of the guarantee, not a calibrated value.
         samples_per_axis: sample points per cell and axis for the per-cell error bounds.
-        gp: GP fitting settings.
+        gp: the landing-error model's prior (default: derived from the scene and the
+            controller, :func:`hopper_sim.error_prior.error_prior`).
         map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
         q_learning: online Q-learning settings for an unknown reward (its discount is the
             scenario's).
-        candidates: the end components exploration steers to: ``"accepting"`` (default),
-            only those that satisfy the formula, so exploration heads for the goal while the
-            RL action collects reward; ``"nonviolating"``, every MEC of the nonviolating
-            sub-model (the paper's literal reading), so exploration cycles where the average
-            reward is highest. Measured on case (a): with ``"nonviolating"`` runs often time
-            out cycling through the A cells (the robust Q-values there dwarf the pull of the
-            goal), so ``"accepting"`` is the default.
+        candidates: the end components exploration steers to: ``"nonviolating"`` (default,
+            the paper's exploration): the optimal MEC of the nonviolating sub-model, toured
+            until the guarantee exceeds P_sat; ``"accepting"`` (the goal-directed variant):
+            the robustly accepting ones, so exploration heads for the goal while the RL
+            action collects reward (runs then often reach the goal before any refit).
+        tour: the in-component tour's mode: ``"reward"`` (default: the component's
+            rewarding cells first, then the rest) or ``"coverage"`` (least recently visited,
+            least known cells first; the reward is left to the RL action), see
+            :mod:`planner.tour`.
         torch_threads: torch intra-op threads during a run (the controller's and the GPs'
             small batches run fastest on one thread; restored after the run).
     """
 
     env: EnvSettings = field(default_factory=EnvSettings)
     delta: float = 0.01
+    beta: float | None = None
     samples_per_axis: int = 5
     gp: FitSettings | None = None
     map_resolution: int = 2
     q_learning: QLearningSettings | None = None
-    candidates: str = "accepting"
+    candidates: str = "nonviolating"
+    tour: str = "reward"
     torch_threads: int = 1
 
 
@@ -134,10 +156,12 @@ class NavigationRunner:
         self.synthesis_settings = ResynthesisSettings(
             samples_per_axis=self.settings.samples_per_axis,
             delta=self.settings.delta,
+            beta=self.settings.beta,
             noise=TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
             p_sat=scenario.p_sat,
             discount=rp.discount,
             candidates=self.settings.candidates,
+            tour=self.settings.tour,
         )
         self.switching = SwitchingSettings(
             p_rl_explore=rp.p_rl_ee, c=rp.c, eps=rp.eps, p_sat=scenario.p_sat
@@ -167,45 +191,97 @@ class NavigationRunner:
                     prior_reward=qs.prior_reward,
                 ),
             )
-        # torch/gpytorch start-up costs (seconds, once per process) out of the batch timings
-        with torch_threads(self.settings.torch_threads):
-            LandingErrorGP(self.settings.gp).warm_up()
+        self.gp_settings = self.settings.gp or error_prior(
+            self.env.model,
+            self.env.controller,
+            terrain=self.env.settings.terrain,
+            cell=scenario.world.cell,
+        )
         res = self.settings.map_resolution
         w = scenario.world
         self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
         self.map_y = (np.arange(w.ny * res) + 0.5) * (w.cell / res)
 
     # ------------------------------------------------------------------ synthesis
+    @property
+    def pays_once(self) -> bool:
+        """Whether a cell pays its reward only on the first landing of a run."""
+        return self.scenario.collect == "once"
+
+    def _collected(self) -> np.ndarray | None:
+        return self.env.collected.copy() if self.pays_once else None
+
     def _synthesise(
         self,
         gp: LandingErrorGP,
         positions: list[np.ndarray],
         errors: list[np.ndarray],
+        actions: list[int],
         current: int | None,
         previous: Resynthesis | None = None,
     ) -> Resynthesis:
         pos = np.asarray(positions, dtype=float).reshape(-1, 2)
         err = np.asarray(errors, dtype=float).reshape(-1, 2)
+        known = self.learner is None
         return resynthesise(
             gp,
             self.grid,
             self.automaton,
             pos,
             err,
-            reward=self.env.reward_table if self.learner is None else None,
+            actions=np.asarray(actions, dtype=np.int64),
+            reward=self.env.reward_table if known else None,
             learner=self.learner,
             initial_cell=self.scenario.start_cell,
             current_state=current,
+            collected=self._collected() if known else None,
             settings=self.synthesis_settings,
             previous=previous,
             clock=self.clock,
         )
 
+    def _replan_reward(self, res: Resynthesis) -> tuple:
+        known = self.learner is None
+        return replan_reward(
+            res,
+            reward=self.env.reward_table if known else None,
+            learner=self.learner,
+            collected=self._collected() if known else None,
+            settings=self.synthesis_settings,
+        )
+
+    @staticmethod
+    def _record(step: int, res: Resynthesis, current: int) -> ResynthesisRecord:
+        fit, mec = res.fit, res.mec
+        values = res.satisfaction.values
+        gp = {}
+        for f in fields(fit):
+            value = np.asarray(getattr(fit, f.name))
+            if f.name != "num_data" and value.dtype.kind in "iuf" and np.isfinite(value).all():
+                gp[f.name] = tuple(float(v) for v in value.ravel())
+        return ResynthesisRecord(
+            step=step,
+            p_worst_current=float(np.clip(values[current], 0.0, 1.0)),
+            p_worst_initial=float(np.clip(values[res.product.initial], 0.0, 1.0)),
+            num_data=int(fit.num_data),
+            gp=gp,
+            mec_states=0 if mec is None else len(mec.component),
+            mec_probability=None if mec is None else float(mec.probability),
+            mec_average_reward=None if mec is None else float(mec.average_reward),
+        )
+
     def _synthesis_event(
-        self, run_index: int, step: int, gp: LandingErrorGP, res: Resynthesis
+        self,
+        run_index: int,
+        step: int,
+        gp: LandingErrorGP,
+        res: Resynthesis,
+        record: ResynthesisRecord,
     ) -> SynthesisEvent:
         gx, gy = np.meshgrid(self.map_x, self.map_y, indexing="ij")
         mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
+        # the map shows, per point, the mean over the actions and the largest std
+        mean, std = mean.mean(axis=1), std.max(axis=1)
         shape = (*gx.shape, 2)
         return SynthesisEvent(
             run_index=run_index,
@@ -214,8 +290,9 @@ class NavigationRunner:
             grid_y=self.map_y,
             gp_mean=mean.reshape(shape),
             gp_std=std.reshape(shape),
-            p_worst_initial=float(res.satisfaction.values[res.product.initial]),
+            p_worst_initial=record.p_worst_initial,
             timings=dict(res.timings),
+            record=record,
         )
 
     # ------------------------------------------------------------------ runs
@@ -226,33 +303,46 @@ class NavigationRunner:
 
     def _run(self, seed: int, run_index: int) -> RunEnd:
         t_start = self.clock()
-        env_seed, policy_seed, gp_seed = np.random.SeedSequence(seed).generate_state(3)
+        # the third word seeded the old GP's k-means; kept so that a seed's draws stay the same
+        env_seed, policy_seed, _ = np.random.SeedSequence(seed).generate_state(3)
         rng = np.random.default_rng(policy_seed)
         self.observer.on_run_start(RunStart(run_index, self.scenario, int(seed)))
         obs, _ = self.env.reset(seed=int(env_seed))
-        gp = LandingErrorGP(self.settings.gp, seed=int(gp_seed))
+        if self.learner is not None:
+            self.learner.collected[:] = False
+        gp = LandingErrorGP(self.gp_settings)
         positions: list[np.ndarray] = []
         errors: list[np.ndarray] = []
+        actions: list[int] = []
         timings = {"gp_fit": 0.0, "abstraction": 0.0, "synthesis": 0.0, "hops": 0.0}
+        timings["replan"] = 0.0
+        records: list[ResynthesisRecord] = []
         batch_max = 0.0
 
-        def install(res: Resynthesis, step: int) -> None:
+        def install(res: Resynthesis, step: int, current: int) -> None:
             nonlocal batch_max
             for k, v in res.timings.items():
                 timings[k] = timings.get(k, 0.0) + v
             batch_max = max(batch_max, sum(res.timings.values()))
             policy.resynthesise(
-                res.exploration, res.goal, res.satisfaction.values, res.fallback, rl=res.rl
+                res.exploration,
+                res.goal,
+                res.satisfaction.values,
+                res.fallback,
+                rl=res.rl,
+                tour=res.tour,
             )
-            self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res))
+            record = self._record(step, res, current)
+            records.append(record)
+            self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res, record))
 
-        res = self._synthesise(gp, positions, errors, None)
+        res = self._synthesise(gp, positions, errors, actions, None)
         product = res.product
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
-        install(res, 0)
+        install(res, 0, pstate)
         nq = self.automaton.n_states
-        total, backups, steps = 0.0, 0, 0
+        total, backups, steps, collections = 0.0, 0, 0, 0
         outcome, reason = "timeout", "step cap"
         if self.accepting_sink[pstate % nq]:
             outcome, reason = "success", "accepted at the start"
@@ -274,16 +364,29 @@ class NavigationRunner:
                 break
             positions.append(si.start_pos)
             errors.append(si.error)
+            actions.append(int(si.decision.executed))
             landed = int(obs["cell"])
+            first = bool(info.get("first_landing", False))
             nxt = product.step(pstate, landed)
+            # the plan values a cell by what it still pays: a first landing in a cell with a
+            # (known or believed) nonzero reward changes the reward plan where cells pay once
+            believed = (
+                self.env.reward_table[landed]
+                if self.learner is None
+                else self.learner.cell_reward()[landed]
+            )
+            collections += int(first and self.env.reward_table[landed] != 0.0)
             if self.learner is not None:
+                if self.pays_once:
+                    self.learner.collected[landed] = True
                 self.learner.update(
                     product.model,
                     pstate,
                     si.decision.executed,
                     nxt,
                     reward,
-                    allowed=res.nonviolating.actions,
+                    allowed=res.q_allowed,
+                    learn_reward=first or not self.pays_once,
                 )
             total += reward
             hop = si.hop
@@ -320,9 +423,15 @@ class NavigationRunner:
             elif self.accepting_sink[q]:
                 outcome, reason = "success", "specification satisfied"
             elif steps % rp.batch_size == 0:
-                res = self._synthesise(gp, positions, errors, pstate, res)
+                res = self._synthesise(gp, positions, errors, actions, pstate, res)
                 product = res.product
-                install(res, steps)
+                install(res, steps, pstate)
+            elif self.pays_once and first and believed != 0.0:
+                t0 = self.clock()
+                q_sol, rl, tour = self._replan_reward(res)
+                res = replace(res, q=q_sol, rl=rl, tour=tour)
+                policy.replan_reward(rl, tour)
+                timings["replan"] += self.clock() - t0
         timings["batch_max"] = batch_max
         end = RunEnd(
             run_index=run_index,
@@ -336,6 +445,8 @@ class NavigationRunner:
             timings=timings,
             reason=reason,
             left_plan_step=policy.left_plan_step,
+            resyntheses=tuple(records),
+            collections=collections,
         )
         self.observer.on_run_end(end)
         return end

@@ -182,7 +182,9 @@ class SweepRow:
 
     ``p_rl_ee`` equals ``c`` in a Table I sweep; ``switch_step`` and ``p_switch`` are ``None``
     when goal reaching never began; ``seconds`` is the run's wall-clock time; ``reason`` says
-    in words what ended the run (the runner's ``RunEnd.reason``, empty if it gives none).
+    in words what ended the run (the runner's ``RunEnd.reason``, empty if it gives none);
+    ``p_trace`` the worst-case satisfaction probability at the run's current state after each
+    synthesis, ``step:P`` pairs separated by spaces (empty if the run function gives none).
     """
 
     c: float
@@ -197,6 +199,7 @@ class SweepRow:
     p_switch: float | None
     backups: int
     seconds: float
+    p_trace: str = ""
     reason: str = ""
 
     @classmethod
@@ -215,12 +218,16 @@ class SweepRow:
             p_switch=None if end.p_switch is None else float(end.p_switch),
             backups=int(end.backups),
             seconds=float(end.seconds),
+            p_trace=" ".join(
+                f"{r.step}:{r.p_worst_current:.4f}" for r in getattr(end, "resyntheses", ())
+            ),
             reason=str(getattr(end, "reason", "")),  # RunEnd.reason: what ended the run
         )
 
 
 ROW_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(SweepRow))
-"""Columns of the raw-rows CSV (``reason`` may be absent from files of older versions)."""
+"""Columns of the raw-rows CSV (``reason`` and ``p_trace`` may be absent from files of older
+versions)."""
 
 
 # --------------------------------------------------------------------------- statistics

@@ -215,7 +215,7 @@ def write_outputs(
 
 
 def _parse_field(name: str, text: str) -> Any:
-    if name == "reason":
+    if name in ("reason", "p_trace"):
         return text
     if name == "outcome":
         if text not in OUTCOMES:
@@ -233,7 +233,7 @@ def _parse_field(name: str, text: str) -> Any:
     return value
 
 
-_OPTIONAL = ("reason",)
+_OPTIONAL = ("reason", "p_trace")
 
 
 def read_rows_csv(path: str | Path) -> list[SweepRow]:

@@ -4,8 +4,11 @@ Both phases mix an LTL action and an RL (reward) action, drawn *only* from the a
 of a sub-model, so that no mix of the two trades away safety:
 
 * **Exploration** (before the switch): the allowed actions are those of the *nonviolating*
-  sub-model; the LTL action steers towards the chosen MEC; the RL action (from an
-  :class:`RLActor`, e.g. robust Q-values) is taken with probability ``P_RL,ee``.
+  sub-model; the LTL action steers towards the chosen MEC and, inside it, follows a
+  :class:`~planner.tour.ComponentTour` when one is installed (it keeps moving through the
+  component; it needs the run's history, which the policy keeps: the step at which each state
+  was last visited); the RL action (from an :class:`RLActor`, e.g. robust Q-values) is taken
+  with probability ``P_RL,ee``.
 * **Goal reaching** (after the switch): the allowed actions are those of the *satisfying*
   sub-model; the LTL action comes from the goal-reaching strategy; the RL action is taken with
   probability ``P_RL,gr = C exp(-eps m)``, ``m`` the number of steps taken in this phase
@@ -49,9 +52,15 @@ none) and reports the phase ``"fallback"``; without one it raises :class:`Policy
 An LTL strategy entry of -1 (no LTL preference, e.g. a state the strategy treats as reached)
 makes the policy take the RL action, reported with source ``"RL"``.
 
+Ties: the RL actor is given the LTL action as its preference, so where the reward is
+indifferent between the best actions (e.g. robust Q-values that are all 0 under wide
+intervals) the RL action is the LTL action instead of the lowest-index one; its other ties,
+and the tour's, are drawn from the caller's generator.
+
 Randomness: every decision draws one uniform number from the caller's generator for the
-LTL/RL choice (always, so the stream does not depend on the probabilities), and the RL actor
-may draw more; the same generator state gives the same decisions.
+LTL/RL choice (always, so the stream does not depend on the probabilities); then the tour (on
+a tie) and the RL actor (when it acts: epsilon-greedy, ties) may draw more; the same generator
+state gives the same decisions.
 """
 
 from __future__ import annotations
@@ -62,6 +71,7 @@ from typing import Protocol
 import numpy as np
 
 from planner.errors import PolicyError
+from planner.tour import ComponentTour
 
 EXPLORATION = "exploration"
 GOAL_REACHING = "goal_reaching"
@@ -71,9 +81,12 @@ RL = "RL"
 
 
 class RLActor(Protocol):
-    """Chooses a reward-seeking action among ``allowed`` (``(n_actions,)`` boolean mask)."""
+    """Chooses a reward-seeking action among ``allowed`` (``(n_actions,)`` boolean mask);
+    ``prefer`` (the LTL action, -1 for none) is the action to take among equally good ones."""
 
-    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int: ...
+    def act(
+        self, state: int, allowed: np.ndarray, rng: np.random.Generator, prefer: int = -1
+    ) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -155,15 +168,25 @@ def _check_prob(name: str, value: float) -> None:
 
 
 def _mix(
-    plan: PhasePlan, rl: RLActor, state: int, p_rl: float, rng: np.random.Generator
+    plan: PhasePlan,
+    rl: RLActor,
+    state: int,
+    p_rl: float,
+    rng: np.random.Generator,
+    tour: ComponentTour | None = None,
+    last_visit: np.ndarray | None = None,
 ) -> tuple[int, str, np.ndarray]:
     allowed = np.asarray(plan.allowed[state], dtype=bool)
     if not allowed.any():
         raise PolicyError(f"state {state} has no allowed action in this phase's sub-model")
     u = rng.random()
     ltl = int(plan.ltl_action[state])
+    if tour is not None and last_visit is not None and tour.covers(state):
+        ltl = tour.action(state, last_visit, rng)
+        if ltl >= 0 and not allowed[ltl]:
+            raise PolicyError(f"state {state}: the tour chose action {ltl}, not allowed")
     if u < p_rl or ltl < 0:
-        action = int(rl.act(state, allowed, rng))
+        action = int(rl.act(state, allowed, rng, prefer=ltl))
         if not allowed[action]:
             raise PolicyError(f"state {state}: the RL actor chose action {action}, not allowed")
         return action, RL, allowed
@@ -171,15 +194,21 @@ def _mix(
 
 
 class ExplorationPolicy:
-    """LTL action towards the chosen MEC, RL action with probability ``p_rl``."""
+    """LTL action towards the chosen MEC (inside it the ``tour``'s, if given), RL action with
+    probability ``p_rl``."""
 
-    def __init__(self, plan: PhasePlan, rl: RLActor, p_rl: float) -> None:
+    def __init__(
+        self, plan: PhasePlan, rl: RLActor, p_rl: float, tour: ComponentTour | None = None
+    ) -> None:
         _check_prob("P_RL,ee", p_rl)
-        self.plan, self.rl, self.p_rl = plan, rl, float(p_rl)
+        self.plan, self.rl, self.p_rl, self.tour = plan, rl, float(p_rl), tour
 
-    def choose(self, state: int, rng: np.random.Generator) -> tuple[int, str, np.ndarray]:
-        """``(action, source, allowed mask)`` in ``state``."""
-        return _mix(self.plan, self.rl, state, self.p_rl, rng)
+    def choose(
+        self, state: int, rng: np.random.Generator, last_visit: np.ndarray | None = None
+    ) -> tuple[int, str, np.ndarray]:
+        """``(action, source, allowed mask)`` in ``state``; ``last_visit`` (per state, -1:
+        never) feeds the tour."""
+        return _mix(self.plan, self.rl, state, self.p_rl, rng, self.tour, last_visit)
 
 
 class GoalReachingPolicy:
@@ -230,10 +259,15 @@ class SwitchingPolicy:
         self.fallback: ExplorationPolicy | None = None
         self.sat_probability: np.ndarray | None = None
         self.goal_sat_probability: np.ndarray | None = None
+        self.last_visit: np.ndarray | None = None
+        """``(n_states,)`` step of this run's last decision in each state (-1: none yet)."""
         self.reset()
 
     def reset(self) -> None:
-        """Start a new run: exploration phase, no steps taken, the latest plans in use."""
+        """Start a new run: exploration phase, no steps taken, no states visited, the latest
+        plans in use."""
+        if self.last_visit is not None:
+            self.last_visit[:] = -1
         self.phase = EXPLORATION
         self.phase_step = 0
         self.step = 0
@@ -256,10 +290,13 @@ class SwitchingPolicy:
         sat_probability: np.ndarray,
         fallback: PhasePlan | None = None,
         rl: RLActor | None = None,
+        tour: ComponentTour | None = None,
     ) -> None:
         """Install the plans of a new synthesis (phase and step counters are kept); ``rl``
-        replaces the RL actor when given. In goal reaching with ``keep_goal_plan`` the
-        goal-reaching plan of the switch stays in use (the new one is kept for later)."""
+        replaces the RL actor when given; ``tour`` is the exploration's in-component tour
+        (none: the exploration plan's LTL action everywhere). In goal reaching with
+        ``keep_goal_plan`` the goal-reaching plan of the switch stays in use (the new one is
+        kept for later)."""
         if rl is not None:
             self.rl = rl
         if self.rl is None:
@@ -276,7 +313,9 @@ class SwitchingPolicy:
             raise PolicyError("sat_probability must lie in [0, 1]")
         sat = np.clip(sat, 0.0, 1.0)
         s = self.settings
-        self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore)
+        if self.last_visit is None or self.last_visit.shape != (shape[0],):
+            self.last_visit = np.full(shape[0], -1, dtype=np.int64)
+        self.exploration = ExplorationPolicy(exploration, self.rl, s.p_rl_explore, tour)
         self.latest_goal = GoalReachingPolicy(goal, self.rl, s.c, s.eps)
         self.fallback = None if fallback is None else ExplorationPolicy(fallback, self.rl, 0.0)
         self.sat_probability = sat
@@ -285,6 +324,22 @@ class SwitchingPolicy:
         elif self.goal is not None:
             # the kept plan acts with the current RL actor (its allowed actions are the plan's)
             self.goal = GoalReachingPolicy(self.goal.plan, self.rl, s.c, s.eps)
+
+    def replan_reward(self, rl: RLActor, tour: ComponentTour | None = None) -> None:
+        """Replace the RL actor of every plan in use (e.g. re-solved after a reward was
+        collected), and the exploration's tour when ``tour`` is given; plans, phase and the
+        guarantee are unchanged."""
+        if self.exploration is None or self.latest_goal is None:
+            raise PolicyError("replan_reward called before resynthesise")
+        self.rl = rl
+        ex = self.exploration
+        self.exploration = ExplorationPolicy(ex.plan, rl, ex.p_rl, tour or ex.tour)
+        for name in ("goal", "latest_goal"):
+            g = getattr(self, name)
+            if g is not None:
+                setattr(self, name, GoalReachingPolicy(g.plan, rl, g.c, g.eps))
+        if self.fallback is not None:
+            self.fallback = ExplorationPolicy(self.fallback.plan, rl, 0.0)
 
     def decide(self, state: int, rng: np.random.Generator) -> Decision:
         """Choose the action in (product) state ``state``."""
@@ -325,7 +380,7 @@ class SwitchingPolicy:
             action, source, allowed = self.fallback.choose(state, rng)
         else:
             p_rl = self.exploration.p_rl
-            action, source, allowed = self.exploration.choose(state, rng)
+            action, source, allowed = self.exploration.choose(state, rng, self.last_visit)
         decision = Decision(
             action=action,
             phase=phase,
@@ -336,6 +391,8 @@ class SwitchingPolicy:
             sat_probability=sat,
             switched=switched,
         )
+        if self.last_visit is not None:
+            self.last_visit[state] = self.step
         self.phase_step += 1
         self.step += 1
         return decision

@@ -12,8 +12,9 @@ so the values are lower bounds on the reward of every distribution inside the in
 * Known ``W``: :func:`robust_q_iteration` iterates the equations to a fixed point (a
   contraction with factor ``gamma``: error ``<= gamma / (1 - gamma) * residual``).
 * Unknown ``W``: :class:`RobustQLearner` learns the reward of a cell from visits (the mean of
-  the rewards observed on landing there; unvisited cells carry ``prior_reward``, by default
-  optimistic, so that greedy choices are drawn towards unexplored cells) and learns ``Q`` by
+  the rewards observed on landing there; unvisited cells carry ``prior_reward``, 0 by default;
+  where a cell pays only on its first landing of a run the caller observes only those
+  landings) and learns ``Q`` by
   asynchronous robust updates ``Q(s, a) <- (1 - alpha) Q(s, a) + alpha * target(s, a)`` on
   the visited rows (online, epsilon-greedy) plus full sweeps after each re-synthesis.
   ``Q`` and the learned rewards are saved and loaded (:meth:`RobustQLearner.save`,
@@ -21,6 +22,16 @@ so the values are lower bounds on the reward of every distribution inside the in
 
 States of the model are mapped to reward *cells* by ``state_cell`` (identity by default; for a
 product model, the grid cell of each product state), so that rewards are learned per cell.
+
+Reward paid once per run (a scenario's ``collect = "once"``): the rewards still to be collected
+are ``W`` with the cells collected so far set to 0, and the plan is the robust Q-iteration on
+those (:attr:`RobustQLearner.collected` does this for the learner). That is a Markov
+approximation: the true reward depends on the set of cells collected, which the state does not
+hold, so the plan values an uncollected cell as if it paid on every future landing (a loop over
+two uncollected cells looks worth more than it is), and it cannot plan an order of
+collection. Re-solving after every collection (as the runner does) keeps the plan from going
+back to a cell it has emptied; what it gives up is the tour optimisation over subsets of cells
+(exponential in their number).
 """
 
 from __future__ import annotations
@@ -156,26 +167,56 @@ def robust_q_iteration(
     return QSolution(_rows_to_table(model, q_rows), v, residual, it, residual < tolerance)
 
 
-def greedy_action(q_row: np.ndarray, allowed: np.ndarray) -> int:
-    """The allowed action of largest Q-value (lowest index on ties); ``allowed`` (n_actions,)."""
+TIE_TOLERANCE = 1e-6
+"""Q-values within ``TIE_TOLERANCE * max(1, |best|)`` of the best are ties (the Q-iteration
+stops at a residual of about this size, so smaller differences carry no information)."""
+
+
+def greedy_action(
+    q_row: np.ndarray,
+    allowed: np.ndarray,
+    prefer: int = -1,
+    rng: np.random.Generator | None = None,
+    tolerance: float = TIE_TOLERANCE,
+) -> int:
+    """The allowed action of largest Q-value; ``allowed`` is an ``(n_actions,)`` mask.
+
+    Ties (values within ``tolerance * max(1, |best|)`` of the best, :data:`TIE_TOLERANCE`) go
+    to ``prefer`` when it is among them (the policy passes its LTL action, so that a reward
+    indifferent between actions does not pull against the task); otherwise to a tied action
+    drawn uniformly from ``rng`` (one draw, only when there is a tie); without ``rng`` to the
+    lowest index (deterministic, e.g. for tests). Where no allowed action has a finite value
+    every allowed action ties.
+    """
     allowed = np.asarray(allowed, dtype=bool)
     if not allowed.any():
         raise QTableError("no allowed action to choose from")
     scores = np.where(allowed, np.nan_to_num(np.asarray(q_row, float), nan=-np.inf), -np.inf)
-    best = np.flatnonzero(scores == scores.max())
-    if best.size == 0 or not np.isfinite(scores.max()):
-        return int(np.flatnonzero(allowed)[0])
-    return int(best[0])
+    best = scores.max()
+    if np.isfinite(best):
+        tied = np.flatnonzero(scores >= best - tolerance * max(1.0, abs(best)))
+    else:
+        tied = np.flatnonzero(allowed)
+    if tied.size == 1:
+        return int(tied[0])
+    if 0 <= prefer < allowed.size and prefer in tied:
+        return int(prefer)
+    if rng is None:
+        return int(tied[0])
+    return int(tied[rng.integers(tied.size)])
 
 
 @dataclass(frozen=True)
 class GreedyQ:
-    """Greedy actor on a fixed Q-table (known reward): ``act`` never explores."""
+    """Greedy actor on a fixed Q-table (known reward): ``act`` never explores; ties as in
+    :func:`greedy_action` (``prefer``, else a draw from ``rng``)."""
 
     q: np.ndarray
 
-    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int:
-        return greedy_action(self.q[state], allowed)
+    def act(
+        self, state: int, allowed: np.ndarray, rng: np.random.Generator, prefer: int = -1
+    ) -> int:
+        return greedy_action(self.q[state], allowed, prefer=prefer, rng=rng)
 
 
 @dataclass(frozen=True)
@@ -184,14 +225,20 @@ class QLearningSettings:
 
     ``discount`` gamma; ``learning_rate`` alpha of the asynchronous update; ``epsilon`` the
     probability of a uniformly random allowed action in :meth:`RobustQLearner.act`;
-    ``prior_reward`` the reward assumed for unvisited cells (default 5: optimistic against the
-    case study's rewards 0, -0.5, 5, 20, neutral would be 0).
+    ``prior_reward`` the reward assumed for unvisited cells (default 0, neutral). An optimistic
+    prior (e.g. 5 against the case study's 0, -0.5, 5, 20) draws greedy choices towards
+    unexplored cells; under wide intervals, though, the robust Q-value of one rewarding cell is
+    0 while a patch of unexplored cells is worth the prior wherever the adversary sends the
+    robot, so it kept drawing later runs away from the cells learned to be worth 20 (case
+    (d)). The exploration of unknown rewards is left to the exploration tour
+    (:mod:`planner.learning` makes it head for cells whose reward was never observed first)
+    and to ``epsilon``.
     """
 
     discount: float = 0.95
     learning_rate: float = 0.5
     epsilon: float = 0.1
-    prior_reward: float = 5.0
+    prior_reward: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.discount < 1.0:
@@ -241,6 +288,10 @@ class RobustQLearner:
         self.q = np.zeros((n_states, n_actions))
         self.reward_sum = np.zeros(n_cells)
         self.reward_count = np.zeros(n_cells, dtype=np.int64)
+        self.collected = np.zeros(n_cells, dtype=bool)
+        """Cells whose reward this run has already collected: they count 0 in
+        :meth:`state_reward` (so in updates and sweeps), while :meth:`cell_reward` keeps what
+        was learned. Set by the caller (reset to all False at the start of a run); not saved."""
         self._adv: OrderingAdversary | None = None
         #: free-form JSON-able record saved with the table (e.g. the provenance of the
         #: scenario it was learnt on); :meth:`load` restores it (``{}`` for older files).
@@ -260,9 +311,14 @@ class RobustQLearner:
         mean = self.reward_sum / np.maximum(self.reward_count, 1)
         return np.where(seen, mean, self.settings.prior_reward)
 
+    def remaining_reward(self) -> np.ndarray:
+        """Learned reward per cell still to be collected: :meth:`cell_reward`, 0 on the
+        :attr:`collected` cells."""
+        return np.where(self.collected, 0.0, self.cell_reward())
+
     def state_reward(self) -> np.ndarray:
-        """Learned reward per model state, ``(n_states,)``."""
-        return self.cell_reward()[self.state_cell]
+        """Reward per model state still to be collected, ``(n_states,)``."""
+        return self.remaining_reward()[self.state_cell]
 
     def observe_reward(self, state: int, reward: float) -> None:
         """Record the reward ``reward`` collected on landing in model state ``state``."""
@@ -300,8 +356,11 @@ class RobustQLearner:
         reward: float,
         *,
         allowed: np.ndarray | None = None,
+        learn_reward: bool = True,
     ) -> float:
-        """One online step: learn ``reward`` of ``landed``, then update ``Q(state, action)``.
+        """One online step: learn ``reward`` of ``landed`` (unless ``learn_reward`` is False:
+        a landing that says nothing about the cell's reward, such as a repeat landing where
+        cells pay once per run), then update ``Q(state, action)``.
 
         Returns the new ``Q(state, action)``.
         """
@@ -311,7 +370,10 @@ class RobustQLearner:
         row = int(model.row_index[state, action])
         if row < 0:
             raise QTableError(f"action {action} is not enabled in state {state} of the model")
-        self.observe_reward(landed, reward)
+        if learn_reward:
+            self.observe_reward(landed, reward)
+        elif not 0 <= landed < self.n_states:
+            raise QTableError(f"state {landed} is not in [0, {self.n_states})")
         target = self._targets(model, allowed)[row]
         a = self.settings.learning_rate
         self.q[state, action] = (1.0 - a) * self.q[state, action] + a * target
@@ -340,14 +402,17 @@ class RobustQLearner:
         self.q = np.where(enabled, np.nan_to_num(sol.q, nan=0.0), self.q)
         return sol
 
-    def act(self, state: int, allowed: np.ndarray, rng: np.random.Generator) -> int:
-        """Epsilon-greedy among ``allowed`` (n_actions,): one uniform draw, then maybe another."""
+    def act(
+        self, state: int, allowed: np.ndarray, rng: np.random.Generator, prefer: int = -1
+    ) -> int:
+        """Epsilon-greedy among ``allowed`` (n_actions,): one uniform draw, then maybe another
+        (the random action, or a tie broken as in :func:`greedy_action`)."""
         allowed = np.asarray(allowed, dtype=bool)
         if not allowed.any():
             raise QTableError(f"no allowed action in state {state}")
         if rng.random() < self.settings.epsilon:
             return int(rng.choice(np.flatnonzero(allowed)))
-        return greedy_action(self.q[state], allowed)
+        return greedy_action(self.q[state], allowed, prefer=prefer, rng=rng)
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike[str], metadata: dict | None = None) -> None:

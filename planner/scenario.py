@@ -10,8 +10,9 @@ A region is a union of axis-aligned rectangles ``[x0, y0, x1, y1]`` in world met
 single cells ``[i, j]``. A rectangle covers the cells whose centres lie in
 ``[x0, x1) x [y0, y1)``; a cell-aligned rectangle therefore covers exactly the cells inside it.
 Each region's name is a label (an atomic proposition of the formula); a cell can carry several
-labels. The reward of a cell, collected each time the robot lands in it, is the sum of the
-rewards of its labels (labels without a reward give 0).
+labels. The reward ``W`` of a cell is the sum of the rewards of its labels (labels without a
+reward give 0). ``collect`` says when it is paid: ``"once"`` (default) on the first landing in
+the cell during a run, ``"every"`` on every landing (:data:`COLLECT_MODES`).
 
 Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case study by name,
 ``a`` to ``d``) and reports problems with the key and the line. The format::
@@ -23,6 +24,8 @@ Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case stud
     goal = "Goal"                   # the goal label, kept apart from the hazard (default)
     p_sat = 0.65                    # switch to goal reaching above this probability
     reward_known = true             # false: rewards are learned from visits
+    collect = "once"                # "once": a cell pays on its first landing of a run;
+                                    # "every": on every landing
 
     [world]
     size = [15.0, 15.0]             # metres (width, height), required
@@ -99,6 +102,9 @@ MAX_REWARD = 1.0e6
 MAX_PROPOSITIONS = 16
 MAX_TOML_DEPTH = 32
 MAX_FILE_BYTES = 1 << 20
+
+COLLECT_MODES: tuple[str, ...] = ("once", "every")
+"""When a cell's reward is paid: on the first landing in it during a run, or on every landing."""
 _LABEL_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
@@ -268,12 +274,14 @@ class Scenario:
         initial: the initial region (drawn blue; not a label).
         start: start position ``(x, y)`` in metres, inside ``initial`` and not in a hazard.
         formula: LTL formula over the labels.
-        rewards: label -> reward collected on each landing in a cell with that label.
+        rewards: label -> reward of a cell with that label (paid as ``collect`` says).
         hazard: the hazard label.
         goal: the goal label (drawn green); its cells may not carry the hazard label. A
             scenario whose formula has no goal may leave it without a region.
         p_sat: worst-case satisfaction probability that starts goal reaching [P_sat].
         reward_known: whether the planner knows ``rewards`` (else it learns them).
+        collect: ``"once"``: a cell's reward is paid on the first landing in it during a run
+            (later landings pay 0; a new run pays again); ``"every"``: on every landing.
         runner: runner settings.
         description: free text.
 
@@ -292,6 +300,7 @@ class Scenario:
     goal: str = "Goal"
     p_sat: float = 0.65
     reward_known: bool = True
+    collect: str = "once"
     runner: RunnerParams = field(default_factory=RunnerParams)
     description: str = ""
 
@@ -363,6 +372,10 @@ class Scenario:
                 f"the rewards of cell ({i}, {j}) sum to {self.reward_grid[i, j]:.4g}, beyond the "
                 f"limit of +-{MAX_REWARD:g}",
                 key="rewards",
+            )
+        if self.collect not in COLLECT_MODES:
+            raise ScenarioValueError(
+                f"must be one of {COLLECT_MODES}, got {self.collect!r}", key="collect"
             )
         if not 0.0 < self.p_sat <= 1.0:
             raise ScenarioValueError(f"must be in (0, 1], got {self.p_sat}", key="p_sat")
@@ -525,6 +538,7 @@ _TOP_KEYS = {
     "goal",
     "p_sat",
     "reward_known",
+    "collect",
     "world",
     "initial",
     "regions",
@@ -682,6 +696,7 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
         goal=r.scalar(data, "goal", "goal", "str", "Goal"),
         p_sat=r.scalar(data, "p_sat", "p_sat", "float", 0.65),
         reward_known=r.scalar(data, "reward_known", "reward_known", "bool", True),
+        collect=r.scalar(data, "collect", "collect", "str", "once"),
         runner=runner,
     )
 

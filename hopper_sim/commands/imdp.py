@@ -1,8 +1,20 @@
 """``hopnav imdp``: solve an interval MDP file, or convert it to another format.
 
 ``hopnav imdp solve FILE [--format prism|drn|bmdp] [--target LABEL] [--avoid LABEL]
-[--optimistic] [--minimize] [--tolerance T] [--json]`` prints the value per state (the
-maximal probability of ``(!avoid) U target``; worst case unless ``--optimistic``).
+[--optimistic] [--minimize] [--tolerance T] [--uncertified] [--json]`` prints, per state,
+the value and its certified bracket ``lower upper`` (the maximal probability of
+``(!avoid) U target``; worst case unless ``--optimistic``): the solver stops when every
+bracket is narrower than the tolerance. ``--uncertified`` stops on the residual instead
+(faster, no error bound; ``upper`` is then the trivial 1).
+
+``hopnav imdp check FILE --ltl FORMULA [--format F] [--optimistic] [--tolerance T] [--json]``
+prints, per state, the maximal probability that a run from there satisfies the LTL
+formula (over the file's labels; worst case unless ``--optimistic``) with its certified
+bracket, through the project's automaton translation, product and exact game solution
+(:func:`planner.imdp.check.check_ltl`). JSON: ``{"initial": [...], "values": [...],
+"lower": [...], "upper": [...], "automaton_states": n}`` (``initial``: the values at the
+file's initial states). A formula that does not parse, or names a proposition that is not
+a label of the file, is a usage error (exit 2).
 
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
@@ -10,7 +22,7 @@ model in another format (``--target`` names bmdp-tool's terminal states).
 ``hopnav imdp export --scenario NAME --out PATH [--to F]`` writes a scenario's MT-PIMDP: the
 grid abstraction with the transition intervals of the landing-error GP prior (no data yet, as
 at the start of a run; noise parameters from the MJCF), times the automaton of the scenario's
-formula, with the labels ``accept`` (robustly accepting end components) and ``fail``
+formula, with the labels ``accept`` (the almost-sure winning states) and ``fail``
 (failure states) added, so that Storm, PRISM or bmdp-tool can check it
 (``--target accept`` for bmdp-tool's terminal states).
 """
@@ -42,8 +54,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--optimistic", action="store_true", help="best case instead of worst")
     s.add_argument("--minimize", action="store_true", help="minimise instead of maximise")
     s.add_argument("--tolerance", type=positive_float, default=1e-8)
+    s.add_argument(
+        "--uncertified",
+        action="store_true",
+        help="stop on the residual (no error bound) instead of the certified bracket",
+    )
     s.add_argument("--json", action="store_true", help="print a JSON object")
     s.set_defaults(func=run_solve, prog=s.prog)
+
+    c = sub.add_parser("check", help="robust satisfaction of an LTL formula on a model file")
+    c.add_argument("file")
+    c.add_argument("--ltl", required=True, help="LTL formula over the file's labels")
+    c.add_argument("--format", choices=FORMATS, help="default: from the file suffix")
+    c.add_argument("--optimistic", action="store_true", help="best case instead of worst")
+    c.add_argument("--tolerance", type=positive_float, default=1e-8)
+    c.add_argument("--json", action="store_true", help="print a JSON object")
+    c.set_defaults(func=run_check, prog=c.prog)
 
     e = sub.add_parser("export", help="write a model file, or a scenario's product, in a format")
     src = e.add_mutually_exclusive_group(required=True)
@@ -96,20 +122,71 @@ def run_solve(args: argparse.Namespace) -> int:
             "optimistic" if args.optimistic else "pessimistic",
             "minimize" if args.minimize else "maximize",
         )
-        sol = solve(Problem(model, spec), ValueIteration(tolerance=args.tolerance))
+        alg = ValueIteration(tolerance=args.tolerance, certified=not args.uncertified)
+        sol = solve(Problem(model, spec), alg)
     except PlannerError as err:
         raise UsageError(str(err)) from None
     if args.json:
         out = {
             "values": sol.values.tolist(),
+            "lower": sol.lower.tolist(),
+            "upper": sol.upper.tolist(),
+            "converged": sol.converged,
             "residual": sol.residual,
             "iterations": sol.iterations,
         }
         print(json.dumps(out))
     else:
-        for s, v in enumerate(sol.values):
-            print(f"{s} {v:.12g}")
-        print(f"# residual {sol.residual:.3g}, iterations {sol.iterations}", file=sys.stderr)
+        _print_bracket(sol.values, sol.lower, sol.upper)
+        state = "certified" if sol.converged and not args.uncertified else "NOT certified"
+        print(
+            f"# bracket width {sol.error:.3g} ({state}), residual {sol.residual:.3g}, "
+            f"iterations {sol.iterations}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _print_bracket(values, lower, upper) -> None:
+    """One line per state: ``state value lower upper``."""
+    print("# state value lower upper", file=sys.stderr)
+    for s, (v, lo, hi) in enumerate(zip(values, lower, upper, strict=True)):
+        print(f"{s} {v:.12g} {lo:.12g} {hi:.12g}")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.imdp import ValueIteration
+    from planner.imdp.check import check_ltl
+    from planner.imdp.io import read_model
+
+    fmt = model_format(args.file, args.format, "--format")
+    input_file(args.file, "model file")
+    try:
+        model = read_model(args.file, fmt)
+        result = check_ltl(
+            model, args.ltl, args.optimistic, ValueIteration(tolerance=args.tolerance)
+        )
+    except PlannerError as err:
+        raise UsageError(str(err)) from None
+    if args.json:
+        out = {
+            "initial": result.values[result.initial].tolist(),
+            "values": result.values.tolist(),
+            "lower": result.lower.tolist(),
+            "upper": result.upper.tolist(),
+            "automaton_states": result.automaton_states,
+        }
+        print(json.dumps(out))
+    else:
+        _print_bracket(result.values, result.lower, result.upper)
+        state = "certified" if result.converged else "NOT certified"
+        init = ", ".join(f"{result.values[i]:.12g}" for i in result.initial)
+        print(
+            f"# initial {init}; automaton states {result.automaton_states}; "
+            f"bracket width {result.solution.error:.3g} ({state})",
+            file=sys.stderr,
+        )
     return 0
 
 

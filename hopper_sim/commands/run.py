@@ -11,6 +11,7 @@ per run).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -32,9 +33,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=positive_int, help="hop cap per run (default: scenario's)")
     p.add_argument(
         "--explore-to",
-        choices=("accepting", "nonviolating"),
-        default="accepting",
+        choices=("nonviolating", "accepting"),
+        default="nonviolating",
         help="end components exploration steers to (see RunnerSettings.candidates)",
+    )
+    p.add_argument(
+        "--tour",
+        choices=("reward", "coverage"),
+        default="reward",
+        help="exploration inside the chosen component (see RunnerSettings.tour)",
     )
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
     p.add_argument(
@@ -114,6 +121,7 @@ def summary_table(ends) -> str:
         "reward",
         "switch",
         "p_switch",
+        "P after each synthesis",
         "left plan",
         "backups",
         "gp s",
@@ -133,6 +141,7 @@ def summary_table(ends) -> str:
                 f"{e.reward:.1f}",
                 "-" if e.switch_step is None else str(e.switch_step),
                 "-" if e.p_switch is None else f"{e.p_switch:.3f}",
+                " ".join(f"{p:.2f}" for p in e.p_worst_trace) or "-",
                 "-" if e.left_plan_step is None else str(e.left_plan_step),
                 str(e.backups),
                 f"{t.get('gp_fit', 0.0):.2f}",
@@ -209,6 +218,8 @@ def _records(ends, files: dict, prov: dict) -> list[dict]:
             "switch_step": e.switch_step,
             "p_switch": e.p_switch,
             "left_plan_step": e.left_plan_step,
+            "collections": e.collections,
+            "resyntheses": [dataclasses.asdict(r) for r in e.resyntheses],
             "backups": e.backups,
             "seconds": e.seconds,
             "timings": e.timings,
@@ -268,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
     if args.max_steps is not None:
         sc = sc.with_runner(max_steps=args.max_steps)
     n_runs = sc.runner.runs if args.runs is None else args.runs
-    settings = RunnerSettings(candidates=args.explore_to)
+    settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
     env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
     try:
         runner = NavigationRunner(sc, env=env, settings=settings, learner=learner)

@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
                     "rewards": dict(sc.rewards),
                     "p_sat": sc.p_sat,
                     "reward_known": sc.reward_known,
+                    "collect": sc.collect,
                     "runner": dataclasses.asdict(sc.runner),
                     "cells_per_label": {lab: int(sc.region_mask(lab).sum()) for lab in sc.labels},
                 },
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"scenario {sc.name}: {sc.description}")
         print(f"world {w.width} x {w.height} m, {w.nx} x {w.ny} cells of {w.cell} m")
         print(f"formula {sc.formula}  (hazard {sc.hazard}, goal {sc.goal}, P_sat {sc.p_sat})")
-        print(f"rewards {dict(sc.rewards)}  (known: {sc.reward_known})")
+        print(f"rewards {dict(sc.rewards)}  (known: {sc.reward_known}, paid {sc.collect})")
         print(f"runner {sc.runner}")
         print(ascii_map(sc))
     if args.png:

@@ -1,235 +1,472 @@
-"""Two sparse GPs for the x and y landing error, with k-means inducing points and warm refits.
+"""Direction-aware model of the hopper's mean landing error: exact GP regression over the
+departure position and the executed action, with a fixed, stated prior.
 
-Units: positions and errors in metres; variances in square metres.
+Units: positions and errors in metres. Actions are indices ``0 .. A-1`` (``N1 .. W2``,
+:data:`planner.imdp.grid.ACTIONS`, ``A = 8``).
 
-Model, per axis ``d`` (independent, batched as one :class:`~planner.gp.sgpr.SparseGP`)::
+**Model**, per axis ``d`` (the two axes are independent), for a hop that departs from ``x``
+and executes action ``a``::
 
-    e_d ~ GP(c_d, s_d^2 RBF(lengthscales l_d)),   observed error = e_d(x) + noise, noise ~ N(0, n_d)
+    error_d = e_d(x, a) + nu_d + r_d
+    e_d(x, a) = c_{a,d} + u_{a,d} f_d(x) + g_{a,d}(x)
 
-Priors (gpytorch priors on the hyperparameters, used as MAP penalties while fitting):
+* ``c_{a,d} ~ N(bias_mean[a, d], bias_std^2)``: a constant per action (the controller's bias:
+  measured undershoots of 0.07 m for one-cell and 0.18-0.2 m for two-cell hops; for MuJoCo
+  the prior mean is simulated, :mod:`hopper_sim.error_prior`);
+* ``f_d ~ GP(0, rho field_std^2 k)``, ``k(x, x') = exp(-|x - x'|^2 / (2 lengthscale^2))``:
+  a field shared by the actions *coupled* on axis ``d`` (``u_{a,d} = 1``; by default those
+  that move at most one cell along ``d``), the terrain's common effect;
+* ``g_{a,d} ~ GP(0, (1 - rho u_{a,d}) field_std^2 k)``, independent per action: the part
+  peculiar to the action (``rho = field_correlation``); an uncoupled action's position-
+  dependent error is its own field alone;
+* ``nu_d``: the known landing noise (``noise``, truncated Gaussian), independent per hop;
+* ``r_d ~ N(0, s_{a,d}^2)``: the residual, independent per hop (the error's dependence on the
+  incoming velocity and on the position inside the cell, which the abstraction's state does
+  not hold). ``s_{a,d}`` is estimated per action and axis (below).
 
-* lengthscales ``l``: Gamma(concentration 4, rate 2): mean 2 m, standard deviation 1 m;
-* outputscale ``s^2``: Gamma(2, 2 / prior_std^2): mean ``prior_std^2``;
-* noise variance ``n``: Gamma(2, 2 / noise_std^2): mean ``noise_std^2``, floor 1e-4 m^2.
+So every action's position-dependent part has std ``field_std`` and length scale
+``lengthscale``, two coupled actions' parts at the same point correlate with ``rho``, and the
+covariance of two hops' mean errors is
+``field_std^2 (rho u_a u_a' + (1 - rho u_a) [a = a']) k(x, x') + bias_std^2 [a = a']``; the
+observation noise of a hop with action ``a`` is ``var(nu) + s_{a,d}^2``.
 
-With no data the model is its prior: mean ``c = 0`` and std ``prior_std`` everywhere, so the
-intervals start wide. The default ``prior_std = 0.15`` m is about a third of the largest mean
-error docs/design.md expects (0.3-0.5 m), so that ``beta * prior_std`` (about 0.74 m for the
-15 x 15 world's ``beta = 4.9``) covers it.
+Where the numbers come from (``benchmarks/error_factors.py``: 600 loop-like departure states
+of case (a), every action hopped in MuJoCo with and without the terrain field): the terrain's
+effect on two actions from the same state correlates with 0.88-1.0 (mean 0.97) among the
+actions that move at most one cell along the axis, but only -0.55 .. 0.5 between a two-cell
+hop *along* the axis and any other action (a two-cell hop's landing is 3-4 times less
+sensitive to a stance force along its direction); hence the coupling and ``rho = 0.95``.
+For MuJoCo (:func:`hopper_sim.error_prior.error_prior`) ``field_std`` is the terrain
+amplitude times the largest sensitivity of a landing to a stance force (0.124 m; measured
+stds of the terrain's effect 0.12-0.16 m for one-cell hops, 0.04-0.05 m along two-cell hops,
+so the prior is conservative for the latter) and ``lengthscale`` the terrain's.
 
-Every :meth:`LandingErrorGP.fit` re-initialises the ``eta`` inducing points by k-means
-(scikit-learn, seeded) on the departure positions and starts the optimiser from the previous
-hyperparameters (warm start); :meth:`LandingErrorGP.reset` forgets both.
-Fitting runs Adam (learning rate ``learning_rate``) on the negative bound plus the negative
-log prior, divided by the number of data; inducing points are optimised too. The first fit
-after construction or :meth:`LandingErrorGP.reset` runs ``cold_steps`` (30) steps, every
-warm-started refit ``steps`` (15): between batches the hyperparameters move little.
-Fitting and prediction run with ``num_threads`` torch threads (default 1: the matrices are
-small, and extra threads only contend on a shared machine); the global setting is restored.
+**Posterior.** Every :meth:`LandingErrorGP.fit` conditions the prior exactly on all data
+(the most recent ``max_data`` hops if there are more): ``alpha = (K + S)^-1 y``,
+``C = (K + S)^-1``, ``mean(x, a) = k_*^T alpha``, ``var(x, a) = k_** - k_*^T C k_*``. The
+kernel hyperparameters are fixed (not fitted), so for fixed residual variances the posterior
+variance can only shrink as data are added (conditioning on more data never increases a
+Gaussian variance): one batch of hops cannot collapse the intervals of cells it did not
+visit. Cost: ``O(n^3)`` per refit plus ``O(n^2 M)`` for ``M`` query points (all actions at
+once, through the kernel's structure); no inducing points (see :mod:`planner.gp.sgpr` and
+``benchmarks/gp_update.py`` for how far a sparse GP with 50 inducing points departs from
+this posterior).
+
+**Residual variances.** ``s_{a,d}^2 = max(v_{a,d} - var(nu), 0)`` with
+``v_{a,d} = (m0 v0 + sum_i l_i^2) / (m0 + n_a)``: the leave-one-out residuals ``l_i`` of the
+hops with action ``a`` (``l_i = alpha_i / C_ii``; their mean square exceeds the noise
+variance by the leave-one-out posterior variance, so the estimate errs high), pooled with
+``m0 = residual_count`` pseudo-hops at ``v0 = var(nu) + residual_std[a, d]^2``; two steps
+of this fixed point from ``v0`` per fit. These are the only quantities estimated from the data
+besides the posterior itself; they move smoothly with the data (pooled over the whole run,
+per action), so they cannot collapse after one batch.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-import gpytorch
 import numpy as np
-import torch
-from sklearn.cluster import KMeans
+from scipy.linalg import lapack
+from threadpoolctl import threadpool_limits
 
 from planner.errors import GPDataError
-from planner.gp.sgpr import SparseGP, SparsePosterior
-from planner.torch_threads import torch_threads
+from planner.gp.noise import TruncatedGaussianNoise
 
-_DTYPE = torch.float64
-_BATCH = torch.Size([2])
+N_ACTIONS = 8
+"""Number of grid actions (``N1, N2, E1, E2, S1, S2, W1, W2``)."""
+
+_CHUNK = 2048  # query points per block in predict (bounds the memory to ~n * 2048 floats)
+
+
+def _default_coupling() -> np.ndarray:
+    from planner.imdp.grid import ACTION_OFFSETS
+
+    return np.abs(ACTION_OFFSETS) <= 1
 
 
 @dataclass(frozen=True)
 class FitSettings:
-    """Settings of the landing-error GPs (lengths in metres)."""
+    """The prior of :class:`LandingErrorGP` (see the module docstring; lengths in metres).
 
-    num_inducing: int = 50
-    steps: int = 15
-    cold_steps: int = 30
-    learning_rate: float = 0.05
-    prior_std: float = 0.15
+    ``bias_mean`` (prior mean of ``c_{a,d}``) and ``residual_std`` (prior guess of
+    ``s_{a,d}``) are scalars or ``(n_actions, 2)`` tables, stored as nested tuples;
+    ``coupled``: ``(n_actions, 2)`` booleans ``u_{a,d}`` (``None``: the actions that move at
+    most one cell along the axis, for the 8 grid actions);
+    ``num_threads`` caps the BLAS threads of a fit or prediction (``None``: leave as is).
+    """
+
     lengthscale: float = 2.0
-    noise_std: float = 0.1
-    jitter: float = 1e-6
+    field_std: float = 0.125
+    field_correlation: float = 0.95
+    bias_mean: float | tuple = 0.0
+    bias_std: float = 0.2
+    residual_std: float | tuple = 0.1
+    residual_count: float = 10.0
+    noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
+    n_actions: int = N_ACTIONS
+    coupled: tuple | None = None
+    max_data: int = 2000
     num_threads: int | None = 1
 
     def __post_init__(self) -> None:
-        for name in ("num_inducing", "steps", "cold_steps"):
-            if int(getattr(self, name)) < (1 if name == "num_inducing" else 0):
-                raise GPDataError(f"FitSettings.{name} out of range: {getattr(self, name)}")
+        if int(self.n_actions) < 1 or int(self.max_data) < 1:
+            raise GPDataError(
+                f"FitSettings needs n_actions >= 1 and max_data >= 1, got {self.n_actions}, "
+                f"{self.max_data}"
+            )
         if self.num_threads is not None and int(self.num_threads) < 1:
             raise GPDataError(f"FitSettings.num_threads must be >= 1, got {self.num_threads}")
-        for name in ("learning_rate", "prior_std", "lengthscale", "noise_std", "jitter"):
+        value = float(self.lengthscale)
+        if not np.isfinite(value) or value <= 0.0:
+            raise GPDataError(f"FitSettings.lengthscale must be positive and finite, got {value}")
+        for name in ("field_std", "bias_std", "residual_count"):
             value = float(getattr(self, name))
-            if not np.isfinite(value) or value <= 0.0:
-                raise GPDataError(f"FitSettings.{name} must be positive and finite, got {value}")
+            if not np.isfinite(value) or value < 0.0:
+                raise GPDataError(f"FitSettings.{name} must be finite and >= 0, got {value}")
+        for name, nonneg in (("bias_mean", False), ("residual_std", True)):
+            raw = np.asarray(getattr(self, name), dtype=np.float64)
+            try:
+                table = np.broadcast_to(raw, (int(self.n_actions), 2))
+            except ValueError as exc:
+                raise GPDataError(
+                    f"FitSettings.{name} must be a scalar or ({self.n_actions}, 2), got shape "
+                    f"{raw.shape}"
+                ) from exc
+            if not np.isfinite(table).all() or (nonneg and (table < 0).any()):
+                what = "finite and >= 0" if nonneg else "finite"
+                raise GPDataError(f"FitSettings.{name} must be {what}")
+            object.__setattr__(self, name, tuple(tuple(float(v) for v in r) for r in table))
+        if not 0.0 <= float(self.field_correlation) <= 1.0:
+            raise GPDataError(
+                f"FitSettings.field_correlation must lie in [0, 1], got {self.field_correlation}"
+            )
+        if self.coupled is None:
+            if int(self.n_actions) != N_ACTIONS:
+                raise GPDataError(f"FitSettings.coupled must be given for {self.n_actions} actions")
+            mask = _default_coupling()
+        else:
+            mask = np.asarray(self.coupled, dtype=bool)
+            if mask.shape != (int(self.n_actions), 2):
+                raise GPDataError(
+                    f"FitSettings.coupled must have shape ({self.n_actions}, 2), got {mask.shape}"
+                )
+        object.__setattr__(self, "coupled", tuple(tuple(bool(v) for v in r) for r in mask))
+
+    @property
+    def bias(self) -> np.ndarray:
+        """``(n_actions, 2)`` prior mean of the error, metres."""
+        return np.asarray(self.bias_mean, dtype=np.float64)
+
+    @property
+    def residual(self) -> np.ndarray:
+        """``(n_actions, 2)`` prior guess of the residual std, metres."""
+        return np.asarray(self.residual_std, dtype=np.float64)
+
+    @property
+    def shared_weight(self) -> np.ndarray:
+        """``(n_actions, 2)`` std with which the shared field enters each action, metres."""
+        u = np.asarray(self.coupled, dtype=np.float64)
+        return self.field_std * np.sqrt(self.field_correlation) * u
+
+    @property
+    def own_var(self) -> np.ndarray:
+        """``(n_actions, 2)`` prior variance of each action's own field ``g``, m^2."""
+        u = np.asarray(self.coupled, dtype=np.float64)
+        return self.field_std**2 * (1.0 - self.field_correlation * u)
+
+    def prior_std(self) -> float:
+        """Prior std of the mean error ``e_d(x, a)``, metres (every action and axis)."""
+        return float(np.hypot(self.field_std, self.bias_std))
 
 
 @dataclass(frozen=True)
 class FitReport:
-    """What one refit did: data size, inducing points, final loss and hyperparameters."""
+    """What one fit did: the data used, hops per action, the residual std per action and axis
+    (``(n_actions, 2)``, metres, beyond the noise nu) and the fixed hyperparameters."""
 
     num_data: int
-    num_inducing: int
-    final_loss: float
-    lengthscale: np.ndarray
-    outputscale: np.ndarray
-    noise: np.ndarray
+    per_action: np.ndarray
+    residual_std: np.ndarray
+    lengthscale: float
+    field_std: float
+    field_correlation: float
+    bias_std: float
 
 
-def _validate(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _validate(
+    positions: np.ndarray, errors: np.ndarray, actions: np.ndarray, n_actions: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     pos = np.asarray(positions, dtype=np.float64)
     err = np.asarray(errors, dtype=np.float64)
+    act = np.asarray(actions)
     if pos.ndim != 2 or pos.shape[1] != 2:
         raise GPDataError(f"positions must have shape (N, 2), got {pos.shape}")
     if err.shape != pos.shape:
         raise GPDataError(f"errors must have shape {pos.shape} like positions, got {err.shape}")
+    if act.shape != (pos.shape[0],):
+        raise GPDataError(f"actions must have shape ({pos.shape[0]},), got {act.shape}")
+    if act.size and (act.dtype.kind not in "iu" or act.min() < 0 or act.max() >= n_actions):
+        bad = np.flatnonzero((act < 0) | (act >= n_actions) | (act != np.round(act)))
+        row = int(bad[0]) if bad.size else 0
+        raise GPDataError(
+            f"actions must be integers in [0, {n_actions}), got {act[row]!r} in row {row}"
+        )
     for name, arr in (("positions", pos), ("errors", err)):
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         if bad.size:
             raise GPDataError(f"{name} has non-finite values in row {int(bad[0])}")
-    return pos, err
+    return pos, err, act.astype(np.int64)
+
+
+def _spd_inverse(a: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive definite matrix from its Cholesky factor (LAPACK)."""
+    chol, info = lapack.dpotrf(a, lower=True, clean=False)
+    if info != 0:
+        raise GPDataError(f"the data's covariance matrix is not positive definite (info {info})")
+    inv, info = lapack.dpotri(chol, lower=True)
+    if info != 0:
+        raise GPDataError(f"inverting the data's covariance matrix failed (info {info})")
+    return np.tril(inv) + np.tril(inv, -1).T
+
+
+def _sq_dist(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    d2 = (p * p).sum(1)[:, None] + (q * q).sum(1)[None, :] - 2.0 * p @ q.T
+    return np.maximum(d2, 0.0)
+
+
+@dataclass(frozen=True)
+class _Axis:
+    """The posterior of one axis: ``alpha`` (n,), ``inv`` = C (n, n), noise per action."""
+
+    alpha: np.ndarray
+    inv: np.ndarray
+    noise_var: np.ndarray
+    rkhs_norm: float
 
 
 class LandingErrorGP:
-    """The x and y landing-error GPs; implements :class:`~planner.gp.protocol.ErrorPredictor`.
+    """The direction-aware landing-error model; implements
+    :class:`~planner.gp.protocol.ErrorPredictor` (see the module docstring).
 
     Args:
-        settings: model and optimiser settings (see the module docstring).
-        seed: seed of the k-means initialisation of the inducing points.
+        settings: the prior (see :class:`FitSettings`).
     """
 
-    def __init__(self, settings: FitSettings | None = None, *, seed: int = 0) -> None:
+    def __init__(self, settings: FitSettings | None = None) -> None:
         self.settings = settings or FitSettings()
-        self.seed = int(seed)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget data and hyperparameters: back to the prior."""
-        s = self.settings
-        mean = gpytorch.means.ConstantMean(batch_shape=_BATCH)
-        base = gpytorch.kernels.RBFKernel(
-            ard_num_dims=2,
-            batch_shape=_BATCH,
-            lengthscale_prior=gpytorch.priors.GammaPrior(4.0, 2.0),
-        )
-        kernel = gpytorch.kernels.ScaleKernel(
-            base,
-            batch_shape=_BATCH,
-            outputscale_prior=gpytorch.priors.GammaPrior(2.0, 2.0 / s.prior_std**2),
-        )
-        likelihood = gpytorch.likelihoods.GaussianLikelihood(
-            batch_shape=_BATCH,
-            noise_prior=gpytorch.priors.GammaPrior(2.0, 2.0 / s.noise_std**2),
-            noise_constraint=gpytorch.constraints.GreaterThan(1e-4),
-        )
-        base.lengthscale = torch.full((2, 1, 2), s.lengthscale)
-        kernel.outputscale = torch.full((2,), s.prior_std**2)
-        likelihood.noise = torch.full((2, 1), s.noise_std**2)
-        z0 = torch.zeros(2, 1, 2, dtype=_DTYPE)
-        self.model = SparseGP(mean, kernel, likelihood, z0, jitter=s.jitter).to(_DTYPE)
-        self._posterior: SparsePosterior = self.model.prior()
-        self.num_data = 0
-        self._warm = False
-
-    def warm_up(self) -> None:
-        """Pay torch's and gpytorch's one-time start-up costs (about 2 s on a loaded 2-core
-        machine, measured) with a tiny fit, then return to the prior. Call it once before a
-        timed loop; it changes no results (the model is :meth:`reset` afterwards)."""
-        rng = np.random.default_rng(0)
-        pos = rng.uniform(0.0, 1.0, size=(8, 2))
-        with torch_threads(self.settings.num_threads):
-            self._fit(pos, np.zeros_like(pos), None)
-            self.predict(pos)
         self.reset()
 
     @property
-    def posterior(self) -> SparsePosterior:
-        return self._posterior
+    def n_actions(self) -> int:
+        return int(self.settings.n_actions)
 
-    def _init_inducing(self, pos: np.ndarray) -> torch.Tensor:
-        distinct = np.unique(pos, axis=0)
-        m = min(self.settings.num_inducing, distinct.shape[0])
-        if m == distinct.shape[0]:
-            centres = distinct
-        else:
-            km = KMeans(n_clusters=m, n_init=1, random_state=self.seed).fit(distinct)
-            centres = km.cluster_centers_
-        z = torch.as_tensor(centres, dtype=_DTYPE)
-        return z.unsqueeze(0).expand(2, *z.shape).clone()
+    def reset(self) -> None:
+        """Forget all data: back to the prior."""
+        s = self.settings
+        self.num_data = 0
+        self._x = np.zeros((0, 2))
+        self._a = np.zeros(0, dtype=np.int64)
+        self._noise_var = s.noise.std**2 + s.residual**2
+        self._axes: tuple[_Axis, ...] = ()
+
+    def _data_kernel(self, kx: np.ndarray, act: np.ndarray, d: int) -> np.ndarray:
+        s = self.settings
+        w = s.shared_weight[act, d]
+        same = act[:, None] == act[None, :]
+        return (np.outer(w, w) + s.own_var[act, d][:, None] * same) * kx + s.bias_std**2 * same
 
     def fit(
         self,
         positions: np.ndarray,
         errors: np.ndarray,
+        actions: np.ndarray,
         *,
         on_step: Callable[[int, float], None] | None = None,
     ) -> FitReport:
-        """Refit both GPs on all data: departure ``positions`` (N, 2), landing ``errors`` (N, 2).
+        """Condition on all data: departure ``positions`` (N, 2), landing ``errors`` (N, 2)
+        relative to the executed action's target, executed ``actions`` (N,).
 
-        ``on_step(step, loss)`` is called after every optimiser step (progress, logging).
-        With ``N = 0`` the model returns to its prior (hyperparameters kept).
+        ``on_step(pass, mean_residual_var)`` is called after each pass of the residual
+        estimate. With ``N = 0`` the model returns to its prior.
         """
-        pos, err = _validate(positions, errors)
-        with torch_threads(self.settings.num_threads):
-            return self._fit(pos, err, on_step)
+        pos, err, act = _validate(positions, errors, actions, self.n_actions)
+        with threadpool_limits(self.settings.num_threads, user_api="blas"):
+            return self._fit(pos, err, act, on_step)
 
     def _fit(
-        self, pos: np.ndarray, err: np.ndarray, on_step: Callable[[int, float], None] | None
+        self,
+        pos: np.ndarray,
+        err: np.ndarray,
+        act: np.ndarray,
+        on_step: Callable[[int, float], None] | None,
     ) -> FitReport:
-        if pos.shape[0] == 0:
-            self.num_data = 0
-            self._posterior = self.model.prior()
-            return self._report(0, float("nan"))
-        self.model.inducing_points = torch.nn.Parameter(self._init_inducing(pos))
-        x = torch.as_tensor(pos, dtype=_DTYPE)
-        y = torch.as_tensor(err.T.copy(), dtype=_DTYPE)
-        opt = torch.optim.Adam(self.model.parameters(), lr=self.settings.learning_rate)
+        s = self.settings
+        self.reset()
+        if pos.shape[0] > s.max_data:
+            pos, err, act = pos[-s.max_data :], err[-s.max_data :], act[-s.max_data :]
         n = pos.shape[0]
-        loss_value = float("nan")
-        steps = self.settings.steps if self._warm else self.settings.cold_steps
-        for step in range(steps):
-            opt.zero_grad()
-            loss = -(self.model.elbo(x, y).sum() + self.model.log_prior()) / n
-            loss.backward()
-            opt.step()
-            loss_value = float(loss.detach())
-            if on_step is not None:
-                on_step(step, loss_value)
+        if n == 0:
+            return self._report()
+        order = np.argsort(act, kind="stable")
+        pos, err, act = pos[order], err[order], act[order]
+        kx = np.exp(-0.5 * _sq_dist(pos, pos) / s.lengthscale**2)
+        v0 = s.noise.std**2 + s.residual**2
+        counts = np.bincount(act, minlength=self.n_actions)
+        noise_var = v0.copy()
+        axes = []
+        for d in range(2):
+            k = self._data_kernel(kx, act, d)
+            y = err[:, d] - s.bias[act, d]
+            for step in range(3):
+                inv = _spd_inverse(k + np.diag(noise_var[act, d]))
+                alpha = inv @ y
+                if step == 2:
+                    break
+                loo = alpha / np.diag(inv)
+                sums = np.bincount(act, weights=loo**2, minlength=self.n_actions)
+                pooled = (s.residual_count * v0[:, d] + sums) / (s.residual_count + counts)
+                noise_var[:, d] = np.maximum(pooled, s.noise.std**2)
+                if on_step is not None:
+                    on_step(2 * d + step, float(noise_var[:, d].mean()))
+            norm = float(np.sqrt(max(alpha @ k @ alpha, 0.0)))
+            axes.append(_Axis(alpha, inv, noise_var[:, d].copy(), norm))
+        self._x, self._a, self._axes = pos, act, tuple(axes)
+        self._noise_var = noise_var
         self.num_data = n
-        self._warm = True
-        self._posterior = self.model.posterior(x, y)
-        return self._report(n, loss_value)
+        return self._report()
 
-    def _report(self, n: int, loss: float) -> FitReport:
-        k = self.model.covar_module
-        with torch.no_grad():
-            return FitReport(
-                num_data=n,
-                num_inducing=int(self.model.inducing_points.shape[1]) if n else 0,
-                final_loss=loss,
-                lengthscale=k.base_kernel.lengthscale.reshape(2, 2).numpy().copy(),
-                outputscale=k.outputscale.reshape(2).numpy().copy(),
-                noise=self.model.likelihood.noise.reshape(2).numpy().copy(),
-            )
+    def _report(self) -> FitReport:
+        s = self.settings
+        return FitReport(
+            num_data=self.num_data,
+            per_action=np.bincount(self._a, minlength=self.n_actions),
+            residual_std=self.residual_std(),
+            lengthscale=float(s.lengthscale),
+            field_std=float(s.field_std),
+            field_correlation=float(s.field_correlation),
+            bias_std=float(s.bias_std),
+        )
 
-    def predict(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Posterior mean and std of the error (metres), each ``(M, 2)`` (columns x, y)."""
+    def residual_std(self) -> np.ndarray:
+        """``(n_actions, 2)`` std of the residual ``r`` beyond the noise nu, metres."""
+        return np.sqrt(np.maximum(self._noise_var - self.settings.noise.std**2, 0.0))
+
+    def _check_points(self, points: np.ndarray) -> np.ndarray:
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2:
             raise GPDataError(f"points must have shape (M, 2), got {pts.shape}")
         if not np.isfinite(pts).all():
             raise GPDataError("points has non-finite values")
-        with torch_threads(self.settings.num_threads):
-            return self._posterior.predict(pts)
+        return pts
 
-    def variation(self, half_width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """See :meth:`planner.gp.sgpr.SparsePosterior.variation`."""
-        return self._posterior.variation(half_width)
+    def _blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        a = np.arange(self.n_actions)
+        return np.searchsorted(self._a, a), np.searchsorted(self._a, a, side="right")
+
+    def predict(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean and std of ``e(x, a)`` at ``points`` (M, 2) for every action:
+        each ``(M, n_actions, 2)``, metres.
+
+        The quadratic forms of the variance are computed in single precision (relative error
+        about 1e-7 of the prior variance, i.e. below 1e-4 m of std), the rest in double.
+        """
+        pts = self._check_points(points)
+        s = self.settings
+        m, na = pts.shape[0], self.n_actions
+        prior_var = s.prior_std() ** 2
+        mean = np.broadcast_to(s.bias, (m, na, 2)).copy()
+        var = np.full((m, na, 2), prior_var)
+        if self.num_data == 0:
+            return mean, np.sqrt(var)
+        with threadpool_limits(s.num_threads, user_api="blas"):
+            for lo in range(0, m, _CHUNK):
+                sl_ = slice(lo, min(lo + _CHUNK, m))
+                dmean, var[sl_] = self._predict_block(pts[sl_], prior_var)
+                mean[sl_] += dmean
+        return mean, np.sqrt(np.clip(var, 0.0, prior_var))
+
+    def _predict_block(self, pts: np.ndarray, prior_var: float) -> tuple[np.ndarray, np.ndarray]:
+        s = self.settings
+        ks = np.exp(-0.5 * _sq_dist(pts, self._x) / s.lengthscale**2)  # (m, n)
+        act, c2 = self._a, s.bias_std**2
+        starts, ends = self._blocks()
+        present = np.flatnonzero(ends > starts)
+        m = pts.shape[0]
+        mean = np.zeros((m, self.n_actions, 2))
+        var = np.zeros((m, self.n_actions, 2))
+        for d, ax in enumerate(self._axes):
+            # cross-covariance of (x, a) with datum i: w_a w_{a_i} k + [a = a_i] (own_a k + c2)
+            w = s.shared_weight[:, d]
+            shared = ks * w[act]
+            own = ks * s.own_var[act, d] + c2  # column i: the own part for a = a_i
+            g = (shared.astype(np.float32) @ ax.inv.astype(np.float32)).astype(np.float64)
+            q_shared = (g * shared).sum(1)
+            m_shared = shared @ ax.alpha
+            cross = np.zeros((m, self.n_actions))
+            quad = np.zeros((m, self.n_actions))
+            m_own = np.zeros((m, self.n_actions))
+            cross[:, present] = np.add.reduceat(g * own, starts[present], axis=1)
+            m_own[:, present] = np.add.reduceat(own * ax.alpha, starts[present], axis=1)
+            for a in present:
+                b = slice(starts[a], ends[a])
+                quad[:, a] = ((own[:, b] @ ax.inv[b, b]) * own[:, b]).sum(1)
+            mean[:, :, d] = w[None, :] * m_shared[:, None] + m_own
+            var[:, :, d] = prior_var - (
+                w[None, :] ** 2 * q_shared[:, None] + 2.0 * w[None, :] * cross + quad
+            )
+        return mean, var
+
+    def variation(
+        self, points: np.ndarray, half_width: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds on how much the mean and the std can change within ``half_width`` (2,)
+        metres (per coordinate) of each of ``points`` (M, 2): ``dmean`` ``(M, n_actions, 2)``
+        and ``dstd`` ``(n_actions, 2)``, metres.
+
+        Mean: Taylor's theorem at the point ``p`` with ``|x_i - p_i| <= h_i``:
+        ``|mean(x) - mean(p)| <= |grad mean(p)| . h + (1/2) H |h|^2``, the gradient exact and
+        ``H`` a bound on the Frobenius norm of the Hessian everywhere: the mean (less its
+        constant prior mean) lies in the kernel's RKHS with norm ``||alpha||_K =
+        sqrt(alpha^T K alpha)``, and each second derivative is the RKHS inner product with a
+        second derivative of the kernel, so ``|d_i d_j mean| <= ||alpha||_K
+        sqrt(d_i^2 d_j^2 k(0))`` (Cauchy-Schwarz), ``= ||alpha||_K field_std sqrt(3) / l^2``
+        for ``i = j`` and ``field_std / l^2`` otherwise (squared exponential kernel).
+        Std: with ``rho = field_std sqrt(2 (1 - k(h)))``, the prior std of the increment
+        ``e(x, a) - e(p, a)``, the posterior covariance is a kernel, so the std is an L2 norm
+        and moves by at most the posterior std of the increment, at most ``rho``.
+        """
+        pts = self._check_points(points)
+        h = np.asarray(half_width, dtype=np.float64).reshape(-1)
+        if h.shape != (2,) or not np.isfinite(h).all() or (h < 0).any():
+            raise GPDataError(f"half_width must be 2 finite values >= 0, got {half_width!r}")
+        s = self.settings
+        shape = (self.n_actions, 2)
+        k_h = np.exp(-0.5 * float(h @ h) / s.lengthscale**2)
+        dstd = np.full(shape, s.field_std * np.sqrt(2.0 * (1.0 - k_h)))
+        m = pts.shape[0]
+        if self.num_data == 0:
+            return np.zeros((m, *shape)), dstd
+        hess = s.field_std * np.sqrt(3.0 + 3.0 + 1.0 + 1.0) / s.lengthscale**2
+        curvature = 0.5 * hess * float(h @ h)
+        dmean = np.zeros((m, *shape))
+        starts, ends = self._blocks()
+        present = np.flatnonzero(ends > starts)
+        with threadpool_limits(s.num_threads, user_api="blas"):
+            for lo in range(0, m, _CHUNK):
+                p = pts[lo : lo + _CHUNK]
+                ks = np.exp(-0.5 * _sq_dist(p, self._x) / s.lengthscale**2)
+                slope = np.zeros((len(p), self.n_actions, 2))
+                for j in range(2):
+                    # d k / d p_j = -(p_j - x_ij) / l^2 k
+                    grad = ks * ((self._x[None, :, j] - p[:, j, None]) / s.lengthscale**2)
+                    for d, ax in enumerate(self._axes):
+                        w = s.shared_weight[:, d]
+                        g = np.outer(grad @ (w[self._a] * ax.alpha), w)
+                        own = np.add.reduceat(grad * ax.alpha, starts[present], axis=1)
+                        g[:, present] += s.own_var[present, d] * own
+                        slope[:, :, d] += np.abs(g) * h[j]
+                norms = np.array([ax.rkhs_norm for ax in self._axes])
+                dmean[lo : lo + len(p)] = slope + curvature * norms[None, None, :]
+        return dmean, dstd

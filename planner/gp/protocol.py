@@ -9,19 +9,32 @@ import numpy as np
 
 @runtime_checkable
 class ErrorPredictor(Protocol):
-    """A model of the mean landing error ``e(x)`` (metres) as a function of position (metres).
+    """A model of the mean landing error ``e(x, a)`` (metres) as a function of the departure
+    position ``x`` (metres) and the executed action ``a`` (``0 .. n_actions - 1``).
 
-    ``predict`` returns the posterior mean and standard deviation of ``e`` per axis.
-    ``variation`` bounds how much they can change between two points whose coordinates differ by
-    at most ``half_width`` (per axis, metres): for all such ``x, x'`` and each axis ``d``,
-    ``|mean_d(x) - mean_d(x')| <= dmean[d]`` and ``|std_d(x) - std_d(x')| <= dstd[d]``. It is
-    what turns a finite set of samples into a bound over a whole cell.
+    ``predict`` returns the posterior mean and standard deviation of ``e`` per action and
+    axis. ``variation`` bounds how much they can change near given points: for every point
+    ``p = points[m]``, every ``x`` with ``|x_i - p_i| <= half_width[i]``, each action ``a``
+    and axis ``d``, ``|mean(x, a, d) - mean(p, a, d)| <= dmean[m, a, d]`` and
+    ``|std(x, a, d) - std(p, a, d)| <= dstd[a, d]``. It is what turns a finite set of samples
+    into a bound over a whole cell. ``residual_std`` is the std of the hop-to-hop error beyond
+    the known landing noise (what the departure position and action do not explain), per
+    action and axis.
     """
 
+    n_actions: int
+
     def predict(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``points`` (M, 2) -> ``(mean (M, 2), std (M, 2))``, all in metres."""
+        """``points`` (M, 2) -> ``(mean (M, n_actions, 2), std (M, n_actions, 2))``, metres."""
         ...
 
-    def variation(self, half_width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``half_width`` (2,) -> ``(dmean (2,), dstd (2,))``, metres."""
+    def variation(
+        self, points: np.ndarray, half_width: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``points`` (M, 2), ``half_width`` (2,) -> ``(dmean (M, n_actions, 2),
+        dstd (n_actions, 2))``, metres."""
+        ...
+
+    def residual_std(self) -> np.ndarray:
+        """``(n_actions, 2)`` std of the residual beyond the landing noise, metres."""
         ...

@@ -42,6 +42,33 @@ def _check_kernel(covar_module: gpytorch.kernels.Kernel) -> None:
         )
 
 
+def rbf_sparse_gp(
+    inducing_points: np.ndarray,
+    *,
+    num_outputs: int = 2,
+    lengthscale: float = 2.0,
+    outputscale: float = 0.15**2,
+    noise: float = 0.1**2,
+    jitter: float = 1e-6,
+) -> SparseGP:
+    """A :class:`SparseGP` with a constant mean (0), an RBF kernel of the given (fixed
+    initial) hyperparameters and the ``(m, d)`` inducing points shared by all outputs, in
+    float64 (the paper's model: 50 inducing points per GP)."""
+    z = torch.as_tensor(np.asarray(inducing_points, dtype=np.float64))
+    if z.dim() != 2:
+        raise GPModelError(f"inducing_points must have shape (m, d), got {tuple(z.shape)}")
+    batch = torch.Size([int(num_outputs)])
+    base = gpytorch.kernels.RBFKernel(ard_num_dims=z.shape[1], batch_shape=batch)
+    kernel = gpytorch.kernels.ScaleKernel(base, batch_shape=batch)
+    likelihood = gpytorch.likelihoods.GaussianLikelihood(batch_shape=batch)
+    base.lengthscale = torch.full((int(num_outputs), 1, z.shape[1]), float(lengthscale))
+    kernel.outputscale = torch.full((int(num_outputs),), float(outputscale))
+    likelihood.noise = torch.full((int(num_outputs), 1), float(noise))
+    zb = z.unsqueeze(0).expand(int(num_outputs), *z.shape).clone()
+    mean = gpytorch.means.ConstantMean(batch_shape=batch)
+    return SparseGP(mean, kernel, likelihood, zb, jitter=jitter).to(torch.float64)
+
+
 class SparseGP(gpytorch.Module):
     """Collapsed sparse GP over ``B`` independent outputs sharing the input locations.
 

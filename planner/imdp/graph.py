@@ -20,11 +20,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from planner.errors import SpecificationError
-from planner.imdp.kernels import robust_attractor, rows_staying_in
-from planner.imdp.model import IMDP
+from planner.imdp.kernels import (
+    backward_distance,
+    maximal_end_components_kernel,
+    prune_kernel,
+    robust_attractor,
+    rows_staying_in,
+)
+from planner.imdp.model import IMDP, first_of_runs
 
 
 @dataclass(frozen=True)
@@ -162,28 +167,10 @@ def possible_reach(
     rows = _all_rows(model, rows)
     target = np.asarray(target, dtype=bool)
     avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
-    src_ok = ~avoid & ~target
-    rows = rows & src_ok[model.row_state]
-    g = state_graph(model, rows).T.tocsr()
-    n = model.n_states
-    # super node n points at every target; BFS over reversed edges from it
-    t_idx = np.flatnonzero(target)
-    ext = sp.bmat(
-        [
-            [g, sp.csr_matrix((n, 1), dtype=np.int8)],
-            [
-                sp.csr_matrix(
-                    (np.ones(t_idx.size, np.int8), (np.zeros_like(t_idx), t_idx)), shape=(1, n)
-                ),
-                None,
-            ],
-        ],
-        format="csr",
-    )
-    order = breadth_first_order(ext, n, directed=True, return_predecessors=False)
-    out = np.zeros(n + 1, dtype=bool)
-    out[order] = True
-    return out[:n]
+    rows = rows & (~avoid & ~target)[model.row_state]
+    ptr, inc_row, _, inc_upper = model.incoming()
+    dist = backward_distance(target, rows, model.row_state, ptr, inc_row, inc_upper)
+    return dist < np.inf
 
 
 def robust_positive_reach(
@@ -288,48 +275,57 @@ def maximal_end_components(
     """
     if mode not in ("pessimistic", "optimistic"):
         raise SpecificationError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
-    r = _all_rows(model, rows).copy()
+    comp, kept = end_component_labels(model, rows, states, mode)
+    return components_from_labels(model, comp, kept)
+
+
+def end_component_labels(
+    model: IMDP,
+    rows: np.ndarray | None = None,
+    states: np.ndarray | None = None,
+    mode: str = "pessimistic",
+) -> tuple[np.ndarray, np.ndarray]:
+    """The maximal end components as labels: ``(comp, rows)``, ``comp[s]`` the component
+    of ``s`` (-1: none) and the rows they keep (see :func:`maximal_end_components`;
+    compiled: :func:`planner.imdp.kernels.maximal_end_components_kernel`)."""
+    r = _all_rows(model, rows)
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
-    s = s.copy()
-    r &= s[model.row_state]
-    succ = model.successor
-    while True:
-        keep = r & (stays_in(model, s) if mode == "pessimistic" else may_stay_in(model, s))
-        s_new = s & has_row(model, keep)
-        r = keep & s_new[model.row_state]
-        g = state_graph(model, r)
-        g = g.multiply(s_new[None, :]).tocsr() if mode == "optimistic" else g
-        _, comp = connected_components(g, directed=True, connection="strong")
-        comp = np.where(s_new, comp, -1)
-        same = comp[succ] == comp[model.row_state[model.entry_row]]
-        if mode == "pessimistic":
-            ok = ~_row_any(model, (model.upper > 0) & ~same)
-        else:
-            must_leave = _row_any(model, (model.lower > 0) & ~same)
-            in_up = _row_sum(model, np.where(same, model.upper, 0.0))
-            ok = ~must_leave & (in_up >= 1.0 - model.tolerance)
-        r_new = r & ok
-        s_new2 = s_new & has_row(model, r_new)
-        r_new &= s_new2[model.row_state]
-        if np.array_equal(r_new, r) and np.array_equal(s_new2, s):
-            break
-        r, s = r_new, s_new2
-    if not s.any():
+    return maximal_end_components_kernel(
+        model.n_states,
+        model.row_state,
+        model.row_ptr,
+        model.successor,
+        model.lower,
+        model.upper,
+        r,
+        s,
+        mode == "optimistic",
+        1.0 - model.tolerance,
+    )
+
+
+def components_from_labels(model: IMDP, comp: np.ndarray, kept: np.ndarray) -> list[EndComponent]:
+    """:class:`EndComponent` objects (sorted by their first state) of component labels."""
+    idx = np.flatnonzero(comp >= 0)
+    if idx.size == 0:
         return []
-    labels = comp[s]
-    idx = np.flatnonzero(s)
-    order = np.argsort(labels, kind="stable")
-    uniq, starts = np.unique(labels[order], return_index=True)
+    order = np.argsort(comp[idx], kind="stable")
+    labels = comp[idx][order]
+    starts = first_of_runs(labels)
     groups = np.split(idx[order], starts[1:])
-    row_idx = np.flatnonzero(r)
+    row_idx = np.flatnonzero(kept)
     row_comp = comp[model.row_state[row_idx]]
     ro = np.argsort(row_comp, kind="stable")
-    ru, rstarts = np.unique(row_comp[ro], return_index=True)
-    row_groups = dict(zip(ru.tolist(), np.split(row_idx[ro], rstarts[1:]), strict=True))
-    return [
-        EndComponent(np.sort(g_states), np.sort(row_groups[int(c)]))
-        for c, g_states in zip(uniq.tolist(), groups, strict=True)
+    rstarts = first_of_runs(row_comp[ro])
+    row_groups = dict(
+        zip(row_comp[ro][rstarts].tolist(), np.split(row_idx[ro], rstarts[1:]), strict=True)
+    )
+    out = [
+        EndComponent(np.sort(g), np.sort(row_groups[int(c)]))
+        for c, g in zip(labels[starts].tolist(), groups, strict=True)
     ]
+    out.sort(key=lambda ec: int(ec.states[0]))
+    return out
 
 
 def robust_buchi_region(
@@ -396,11 +392,29 @@ def optimistic_accepting_end_components(
     rows: np.ndarray | None = None,
 ) -> list[EndComponent]:
     """End components (cooperative adversary) that avoid ``bad`` and contain a ``good`` state."""
-    ecs = maximal_end_components(
+    comp, kept = _optimistic_accepting_labels(model, good, bad, rows)
+    return components_from_labels(model, comp, kept)
+
+
+def optimistic_accepting_states(
+    model: IMDP,
+    good: np.ndarray,
+    bad: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> np.ndarray:
+    """Union of the states of :func:`optimistic_accepting_end_components` (a mask)."""
+    comp, _ = _optimistic_accepting_labels(model, good, bad, rows)
+    return comp >= 0
+
+
+def _optimistic_accepting_labels(model, good, bad, rows):
+    comp, kept = end_component_labels(
         model, rows=rows, states=~np.asarray(bad, dtype=bool), mode="optimistic"
     )
     good = np.asarray(good, dtype=bool)
-    return [ec for ec in ecs if good[ec.states].any()]
+    accepted = np.unique(comp[good & (comp >= 0)])
+    comp = np.where(np.isin(comp, accepted), comp, -1)
+    return comp, kept & (comp[model.row_state] >= 0)
 
 
 @dataclass(frozen=True)
@@ -421,12 +435,17 @@ class SubModel:
 def prune(model: IMDP, removed: np.ndarray, rows: np.ndarray | None = None) -> SubModel:
     """Remove the rows that may enter ``removed``, then the states left without rows, and
     repeat until nothing changes (Jiang et al. 2023, Algorithm 1)."""
-    r = _all_rows(model, rows).copy()
-    bad = np.asarray(removed, dtype=bool).copy()
-    while True:
-        r &= ~bad[model.row_state] & ~may_enter(model, bad)
-        new_bad = bad | ~has_row(model, r)
-        if np.array_equal(new_bad, bad):
-            break
-        bad = new_bad
+    r = _all_rows(model, rows)
+    ptr, inc_row, _, inc_upper = model.incoming()
+    bad, r = prune_kernel(
+        np.asarray(removed, dtype=bool),
+        r,
+        model.row_state,
+        model.row_ptr,
+        model.successor,
+        model.upper,
+        ptr,
+        inc_row,
+        inc_upper,
+    )
     return SubModel(~bad, r, actions_from_rows(model, r))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
+import numba
 import numpy as np
 
 from planner.errors import (
@@ -118,51 +119,19 @@ class IMDP:
                 f"{len(s)}, {len(a)}, {len(t)}, {len(lo)}, {len(up)}"
             )
         n_act = int(n_actions) if n_actions is not None else (int(a.max()) + 1 if a.size else 1)
-        for arr, name, hi in ((s, "state", n), (t, "successor", n), (a, "action", n_act)):
-            bad = np.flatnonzero((arr < 0) | (arr >= hi))
-            if bad.size:
-                i = bad[0]
-                raise IndexOutOfRangeError(
-                    f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): {name} "
-                    f"{arr[i]} is not in [0, {hi})"
-                )
-        bad = np.flatnonzero(~np.isfinite(lo) | ~np.isfinite(up) | (lo < 0) | (up > 1))
-        if bad.size:
-            i = bad[0]
-            raise IntervalBoundsError(
-                f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): bounds "
-                f"[{lo[i]}, {up[i]}] are not inside [0, 1]"
-            )
-        bad = np.flatnonzero(lo > up)
-        if bad.size:
-            i = bad[0]
-            raise IntervalBoundsError(
-                f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]}): lower bound "
-                f"{lo[i]} exceeds upper bound {up[i]}"
-            )
-        same = (s[1:] == s[:-1]) & (a[1:] == a[:-1])
-        ordered = (
-            (s[1:] > s[:-1]) | ((s[1:] == s[:-1]) & (a[1:] > a[:-1])) | (same & (t[1:] >= t[:-1]))
-        )
-        if not ordered.all():  # builders that emit sorted entries skip the sort
-            order = np.lexsort((t, a, s))
-            s, a, t, lo, up = s[order], a[order], t[order], lo[order], up[order]
-            same = (s[1:] == s[:-1]) & (a[1:] == a[:-1])
-        dup = np.flatnonzero(same & (t[1:] == t[:-1]))
-        if dup.size:
-            i = dup[0]
+        code, i, perm = _check_entries(s, a, t, lo, up, n, n_act)
+        if code:
+            _raise_entry_error(code, i, s, a, t, lo, up, n, n_act)
+        if perm.size:  # builders that emit sorted entries skip the reordering
+            s, a, t, lo, up = s[perm], a[perm], t[perm], lo[perm], up[perm]
+        code, r, row_ptr, sum_lo, sum_up = _rows(s, a, t, lo, up, float(tolerance))
+        if code == 1:
             raise DuplicateSuccessorError(
-                f"state {s[i]}, action {a[i]} lists successor {t[i]} more than once"
+                f"state {s[r]}, action {a[r]} lists successor {t[r]} more than once"
             )
-        starts = np.flatnonzero(np.concatenate(([True], ~same))) if s.size else np.zeros(0, int)
-        row_ptr = np.append(starts, s.size).astype(np.int64)
-        row_state = s[starts]
-        row_action = a[starts]
-        sum_lo = np.add.reduceat(lo, starts) if s.size else np.zeros(0)
-        sum_up = np.add.reduceat(up, starts) if s.size else np.zeros(0)
-        bad = np.flatnonzero((sum_lo > 1 + tolerance) | (sum_up < 1 - tolerance))
-        if bad.size:
-            r = bad[0]
+        row_state = s[row_ptr[:-1]]
+        row_action = a[row_ptr[:-1]]
+        if code == 2:
             raise RowSumError(
                 f"state {row_state[r]}, action {row_action[r]}: bounds do not bracket 1 "
                 f"(sum of lower bounds {sum_lo[r]:.12g}, sum of upper bounds "
@@ -175,31 +144,97 @@ class IMDP:
                 f"state {empty[0]} has no enabled action ({empty.size} such states); "
                 "give absorbing states a self-loop action"
             )
+        self._init_arrays(
+            n, n_act, float(tolerance), row_state, row_action, row_ptr, t, lo, up, sum_lo, sum_up
+        )
+        self._set_labels(labels, propositions)
+        self._set_rest(initial, action_names)
 
+    @classmethod
+    def _trusted(
+        cls,
+        n_states: int,
+        row_state: np.ndarray,
+        row_action: np.ndarray,
+        row_ptr: np.ndarray,
+        successor: np.ndarray,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        *,
+        n_actions: int,
+        label_matrix: np.ndarray,
+        propositions: tuple[str, ...],
+        initial: Iterable[int],
+        action_names: Sequence[str],
+        tolerance: float,
+    ) -> IMDP:
+        """A model from arrays already in the internal layout and known valid (rows
+        sorted by state then action, entries by successor, bounds checked): for
+        constructions inside the planner (products, sub-models) that would otherwise
+        validate millions of entries again."""
+        self = cls.__new__(cls)
+        starts = row_ptr[:-1]
+        sum_lo = np.add.reduceat(lower, starts) if lower.size else np.zeros(0)
+        sum_up = np.add.reduceat(upper, starts) if upper.size else np.zeros(0)
+        self._init_arrays(
+            int(n_states),
+            int(n_actions),
+            float(tolerance),
+            row_state,
+            row_action,
+            row_ptr,
+            successor,
+            lower,
+            upper,
+            sum_lo,
+            sum_up,
+        )
+        mask = np.asarray(label_matrix, dtype=bool)
+        mask.setflags(write=False)
+        self.propositions = tuple(propositions)
+        self.label_matrix = mask
+        self._labels = None
+        self._set_rest(initial, action_names)
+        return self
+
+    def _init_arrays(
+        self,
+        n: int,
+        n_act: int,
+        tolerance: float,
+        row_state: np.ndarray,
+        row_action: np.ndarray,
+        row_ptr: np.ndarray,
+        successor: np.ndarray,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        sum_lo: np.ndarray,
+        sum_up: np.ndarray,
+    ) -> None:
+        rows_per_state = np.bincount(row_state, minlength=n)
         self.n_states: int = n
         self.n_actions: int = n_act
-        self.tolerance: float = float(tolerance)
+        self.tolerance: float = tolerance
         self.row_state: np.ndarray = row_state
         self.row_action: np.ndarray = row_action
         self.row_ptr: np.ndarray = row_ptr
         self.state_ptr: np.ndarray = np.concatenate(([0], np.cumsum(rows_per_state))).astype(
             np.int64
         )
-        self.successor: np.ndarray = t
-        self.lower: np.ndarray = lo
-        self.upper: np.ndarray = up
-        self.entry_row: np.ndarray = np.repeat(
-            np.arange(len(row_state), dtype=np.int64), np.diff(row_ptr)
-        )
+        self.successor: np.ndarray = successor
+        self.lower: np.ndarray = lower
+        self.upper: np.ndarray = upper
+        self.entry_row: np.ndarray = _entry_rows(row_ptr)
         self.row_lower_sum: np.ndarray = sum_lo
         self.row_upper_sum: np.ndarray = sum_up
         self.enabled: np.ndarray = np.zeros((n, n_act), dtype=bool)
         self.enabled[row_state, row_action] = True
         self.row_index: np.ndarray = np.full((n, n_act), -1, dtype=np.int64)
         self.row_index[row_state, row_action] = np.arange(len(row_state))
+        self._incoming: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
-        self._incoming: tuple[np.ndarray, np.ndarray] | None = None
-        self._set_labels(labels, propositions)
+    def _set_rest(self, initial: Iterable[int], action_names: Sequence[str] | None) -> None:
+        n, n_act = self.n_states, self.n_actions
         init = np.unique(_int_array(list(initial), "initial"))
         bad = np.flatnonzero((init < 0) | (init >= n))
         if bad.size or init.size == 0:
@@ -228,32 +263,44 @@ class IMDP:
         self, labels: Sequence[Iterable[str]] | None, propositions: Sequence[str] | None
     ) -> None:
         if labels is None:
-            label_sets = [frozenset()] * self.n_states
+            label_sets = None
+            props = tuple(str(p) for p in propositions) if propositions is not None else ()
         else:
             label_sets = [frozenset(str(x) for x in ls) for ls in labels]
             if len(label_sets) != self.n_states:
                 raise ModelError(f"{len(label_sets)} label sets for {self.n_states} states")
-        if propositions is None:
-            props = tuple(sorted(set().union(*label_sets)))
-        else:
-            props = tuple(str(p) for p in propositions)
-            known = set(props)
-            for i, ls in enumerate(label_sets):
-                unknown = ls - known
-                if unknown:
-                    raise UnknownLabelError(
-                        f"state {i} carries label(s) {sorted(unknown)} that are not among "
-                        f"the declared propositions {props}"
-                    )
+            if propositions is None:
+                props = tuple(sorted(set().union(*label_sets)))
+            else:
+                props = tuple(str(p) for p in propositions)
+                known = set(props)
+                for i, ls in enumerate(label_sets):
+                    unknown = ls - known
+                    if unknown:
+                        raise UnknownLabelError(
+                            f"state {i} carries label(s) {sorted(unknown)} that are not "
+                            f"among the declared propositions {props}"
+                        )
         self.propositions: tuple[str, ...] = props
-        self.labels: tuple[frozenset[str], ...] = tuple(label_sets)
-        index = {p: i for i, p in enumerate(props)}
         mask = np.zeros((self.n_states, len(props)), dtype=bool)
-        for i, ls in enumerate(label_sets):
-            for p in ls:
-                mask[i, index[p]] = True
+        if label_sets is not None:
+            index = {p: i for i, p in enumerate(props)}
+            for i, ls in enumerate(label_sets):
+                for p in ls:
+                    mask[i, index[p]] = True
         mask.setflags(write=False)
         self.label_matrix: np.ndarray = mask
+        self._labels: tuple[frozenset[str], ...] | None = (
+            tuple(label_sets) if label_sets is not None else None
+        )
+
+    @property
+    def labels(self) -> tuple[frozenset[str], ...]:
+        """Per-state label sets (from :attr:`label_matrix`; computed once)."""
+        if self._labels is None:
+            names = np.array(self.propositions, dtype=object)
+            self._labels = tuple(frozenset(names[row].tolist()) for row in self.label_matrix)
+        return self._labels
 
     # ------------------------------------------------------------------ queries
     @property
@@ -324,3 +371,107 @@ class IMDP:
             f"IMDP(states={self.n_states}, actions={self.n_actions}, rows={self.n_rows}, "
             f"entries={self.n_entries}, propositions={self.propositions})"
         )
+
+
+@numba.njit(cache=True, nogil=True)
+def _check_entries(s, a, t, lo, up, n, n_act):
+    """Ranges and bounds of every entry, and the order of the entries: ``(code, index,
+    permutation)`` with code 0 (fine), 1 state, 2 successor, 3 action out of range,
+    4 a bound outside ``[0, 1]`` or not finite, 5 ``lower > upper``; the permutation is
+    empty when the entries are already sorted by (state, action, successor), else it
+    sorts them (a counting sort on (state, action), then each row by successor)."""
+    m = s.size
+    empty = np.zeros(0, dtype=np.int64)
+    for i in range(m):
+        if s[i] < 0 or s[i] >= n:
+            return 1, i, empty
+        if t[i] < 0 or t[i] >= n:
+            return 2, i, empty
+        if a[i] < 0 or a[i] >= n_act:
+            return 3, i, empty
+        li = lo[i]
+        ui = up[i]
+        if not (np.isfinite(li) and np.isfinite(ui)) or li < 0.0 or ui > 1.0:
+            return 4, i, empty
+        if li > ui:
+            return 5, i, empty
+    ordered = True
+    for i in range(1, m):
+        k0 = s[i - 1] * n_act + a[i - 1]
+        k1 = s[i] * n_act + a[i]
+        if k1 < k0 or (k1 == k0 and t[i] < t[i - 1]):
+            ordered = False
+            break
+    if ordered:
+        return 0, 0, empty
+    n_keys = n * n_act
+    ptr = np.zeros(n_keys + 1, dtype=np.int64)
+    for i in range(m):
+        ptr[s[i] * n_act + a[i] + 1] += 1
+    for k in range(n_keys):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:-1].copy()
+    perm = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        k = s[i] * n_act + a[i]
+        perm[fill[k]] = i
+        fill[k] += 1
+    for k in range(n_keys):
+        # insertion sort of the row by successor (rows are short)
+        for j in range(ptr[k] + 1, ptr[k + 1]):
+            e = perm[j]
+            key = t[e]
+            h = j - 1
+            while h >= ptr[k] and t[perm[h]] > key:
+                perm[h + 1] = perm[h]
+                h -= 1
+            perm[h + 1] = e
+    return 0, 0, perm
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows(s, a, t, lo, up, tol):
+    """Rows of sorted entries: ``(code, index, row_ptr, sum_lower, sum_upper)``; code 1: a
+    duplicate successor at entry ``index``, 2: row ``index`` does not bracket 1."""
+    m = s.size
+    n_rows = 0
+    for i in range(m):
+        if i == 0 or s[i] != s[i - 1] or a[i] != a[i - 1]:
+            n_rows += 1
+    row_ptr = np.empty(n_rows + 1, dtype=np.int64)
+    sum_lo = np.zeros(n_rows)
+    sum_up = np.zeros(n_rows)
+    r = -1
+    for i in range(m):
+        if i == 0 or s[i] != s[i - 1] or a[i] != a[i - 1]:
+            r += 1
+            row_ptr[r] = i
+        elif t[i] == t[i - 1]:
+            return 1, i, row_ptr, sum_lo, sum_up
+        sum_lo[r] += lo[i]
+        sum_up[r] += up[i]
+    row_ptr[n_rows] = m
+    for k in range(n_rows):
+        if sum_lo[k] > 1.0 + tol or sum_up[k] < 1.0 - tol:
+            return 2, k, row_ptr, sum_lo, sum_up
+    return 0, 0, row_ptr, sum_lo, sum_up
+
+
+@numba.njit(cache=True, nogil=True)
+def _entry_rows(row_ptr):
+    """The row of every entry."""
+    out = np.empty(row_ptr[-1], dtype=np.int64)
+    for r in range(row_ptr.size - 1):
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            out[e] = r
+    return out
+
+
+def _raise_entry_error(code, i, s, a, t, lo, up, n, n_act) -> None:
+    where = f"entry {i} (state {s[i]}, action {a[i]}, successor {t[i]})"
+    if code in (1, 2, 3):
+        name, arr, hi = {1: ("state", s, n), 2: ("successor", t, n), 3: ("action", a, n_act)}[code]
+        raise IndexOutOfRangeError(f"{where}: {name} {arr[i]} is not in [0, {hi})")
+    if code == 4:
+        raise IntervalBoundsError(f"{where}: bounds [{lo[i]}, {up[i]}] are not inside [0, 1]")
+    raise IntervalBoundsError(f"{where}: lower bound {lo[i]} exceeds upper bound {up[i]}")

@@ -7,8 +7,19 @@ Product state ``(s, q)`` has index ``s * n_q + q``. The reward ``W(s)`` of a mod
 is carried to every ``(s, q)`` and is collected on landing.
 
 Acceptance is Rabin with pairs ``(G_i, B_i)`` of automaton states lifted to
-``S x G_i``, ``S x B_i``. Worst-case satisfaction of the formula = worst-case maximal
-probability of reaching the union of the robustly accepting end components.
+``S x G_i``, ``S x B_i``.
+
+Worst-case satisfaction (:meth:`ProductIMDP.satisfaction`) is the exact value of the game
+``P_check = max_pi min_zeta P(formula)`` with a dynamic interval adversary, also where
+lower bounds are 0 (the adversary chooses supports): :mod:`planner.imdp.rabin`. It is *not*
+in general the worst-case probability of reaching the robustly accepting end components
+(:meth:`ProductIMDP.accepting_end_components`, the paper's candidates for the MEC choice):
+that probability is a lower bound, equal to ``P_check`` when the automaton's accepting
+states are absorbing (co-safe formulas such as ``!Haz U Goal``) but smaller when the
+adversary can keep a satisfying run outside every such component (``G !c``). Best-case
+satisfaction (``pessimistic=False``): the adversary cooperates, so the product is a Markov
+decision process over the polytopes, and the value is the maximal probability of reaching
+its accepting end components (exact).
 """
 
 from __future__ import annotations
@@ -16,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from planner.automaton import RabinAutomaton
@@ -23,6 +35,7 @@ from planner.errors import ProductError
 from planner.imdp import graph
 from planner.imdp.graph import EndComponent, SubModel
 from planner.imdp.model import IMDP
+from planner.imdp.rabin import almost_sure_region, robust_satisfaction
 from planner.imdp.solve import (
     Problem,
     ReachAvoid,
@@ -90,31 +103,26 @@ class ProductIMDP:
         )
         """Automaton letter of each model state's label set."""
         delta = automaton.transitions
-        s, a, t, lo, up = model.coo()
-        # every model state's block of entries once per automaton state, in the order
-        # (s, q, a, t): product state s * nq + q, so the entries come out sorted
-        start = model.row_ptr[model.state_ptr[:-1]]
-        length = model.row_ptr[model.state_ptr[1:]] - start
-        seg_start = np.repeat(start, nq)
-        seg_len = np.repeat(length, nq)
-        offsets = np.concatenate(([0], np.cumsum(seg_len)[:-1]))
-        idx = np.arange(int(seg_len.sum()), dtype=np.int64) + np.repeat(
-            seg_start - offsets, seg_len
+        layout = _product_layout(
+            model.state_ptr,
+            model.row_ptr,
+            model.row_action,
+            model.successor,
+            model.lower,
+            model.upper,
+            delta,
+            self.letters,
+            nq,
         )
-        q = np.repeat(np.tile(np.arange(nq, dtype=np.int64), model.n_states), seg_len)
-        s, a, t, lo, up = s[idx], a[idx], t[idx], lo[idx], up[idx]
-        ps = s * nq + q
-        pt = t * nq + delta[q, self.letters[t]]
         init = model.initial * nq + delta[automaton.initial, self.letters[model.initial]]
-        self.model: IMDP = IMDP(
+        # every model state's rows once per automaton state, in the order (s, q, a, t):
+        # product state s * nq + q and successors t * nq + q' come out sorted, and the
+        # bounds are the model's (already checked)
+        self.model: IMDP = IMDP._trusted(
             model.n_states * nq,
-            ps,
-            a,
-            pt,
-            lo,
-            up,
+            *layout,
             n_actions=model.n_actions,
-            labels=[model.labels[i // nq] for i in range(model.n_states * nq)],
+            label_matrix=np.repeat(model.label_matrix, nq, axis=0),
             propositions=model.propositions,
             initial=init,
             action_names=model.action_names,
@@ -133,6 +141,7 @@ class ProductIMDP:
         self._accepting: list[EndComponent] | None = None
         self._satisfaction: Solution | None = None
         self._failure: np.ndarray | None = None
+        self._winning: np.ndarray | None = None
 
     # ------------------------------------------------------------------ indexing
     @property
@@ -188,10 +197,7 @@ class ProductIMDP:
         no ``upper > 0`` path to an end component that a cooperative adversary keeps
         visiting some ``G_i`` and no ``B_i`` (computed once, then a copy is returned)."""
         if self._failure is None:
-            target = np.zeros(self.n_states, dtype=bool)
-            for g, b in zip(self.good, self.bad, strict=True):
-                for ec in graph.optimistic_accepting_end_components(self.model, g, b):
-                    target[ec.states] = True
+            target = self._optimistic_accepting()
             self._failure = ~graph.possible_reach(self.model, target)
         return self._failure.copy()
 
@@ -202,26 +208,55 @@ class ProductIMDP:
         algorithm: ValueIteration | None = None,
     ) -> Solution:
         """Max probability of satisfying the formula per product state (worst case by
-        default), with a strategy that reaches the accepting end components.
+        default: ``P_check``, see the module docstring), with a memoryless optimal strategy
+        and the certified bracket ``lower``/``upper`` (``values == lower``).
 
         The pessimistic solution without ``allowed`` is cached. The optimistic value uses
-        the optimistic accepting components.
+        the optimistic accepting components (the cooperating adversary makes it an MDP).
         """
         cache = pessimistic and allowed is None and algorithm is None
         if cache and self._satisfaction is not None:
             return self._satisfaction
         if pessimistic:
-            target = self.accepting_states()
+            sol = robust_satisfaction(
+                self.model, self._good_matrix(), self._bad_matrix(), allowed, algorithm
+            )
         else:
-            target = np.zeros(self.n_states, dtype=bool)
-            for g, b in zip(self.good, self.bad, strict=True):
-                for ec in graph.optimistic_accepting_end_components(self.model, g, b):
-                    target[ec.states] = True
-        spec = Specification(ReachAvoid(target), "pessimistic" if pessimistic else "optimistic")
-        sol = solve(Problem(self.model, spec, allowed), algorithm)
+            rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+            target = self._optimistic_accepting(rows)
+            spec = Specification(ReachAvoid(target), "optimistic")
+            sol = solve(Problem(self.model, spec, allowed), algorithm)
         if cache:
             self._satisfaction = sol
         return sol
+
+    def winning_states(self, allowed: np.ndarray | None = None) -> np.ndarray:
+        """States from which the formula holds with probability 1 against every adversary
+        (:func:`planner.imdp.rabin.almost_sure_region`; cached without ``allowed``)."""
+        if allowed is None and self._winning is not None:
+            return self._winning.copy()
+        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
+        win, _ = almost_sure_region(self.model, self._good_matrix(), self._bad_matrix(), rows)
+        if allowed is None:
+            self._winning = win
+        return win.copy()
+
+    def _optimistic_accepting(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """States of the end components that a cooperating adversary keeps on some pair."""
+        target = np.zeros(self.n_states, dtype=bool)
+        for g, b in zip(self.good, self.bad, strict=True):
+            target |= graph.optimistic_accepting_states(self.model, g, b, rows)
+        return target
+
+    def _good_matrix(self) -> np.ndarray:
+        if not self.good:
+            return np.zeros((0, self.n_states), dtype=bool)
+        return np.stack(self.good)
+
+    def _bad_matrix(self) -> np.ndarray:
+        if not self.bad:
+            return np.zeros((0, self.n_states), dtype=bool)
+        return np.stack(self.bad)
 
     def nonviolating(self) -> SubModel:
         """The nonviolating sub-model: remove actions that may reach a failure state, then
@@ -245,15 +280,11 @@ class ProductIMDP:
         return SubModel(states, rows, graph.actions_from_rows(self.model, rows))
 
     def goal_strategy(self, allowed: np.ndarray | None = None) -> np.ndarray:
-        """Action per product state that maximises the worst-case satisfaction probability:
-        reach an accepting end component, then (inside) visit its ``G`` states again and
-        again with its own actions. -1 where no action is allowed or the value is 0."""
-        sol = self.satisfaction(allowed=allowed)
-        strategy = sol.strategy.copy()
-        rows = None if allowed is None else graph.rows_from_actions(self.model, allowed)
-        for ec in self.accepting_end_components():
-            strategy[ec.states] = self._inside_strategy(ec, rows)
-        return strategy
+        """Action per product state that maximises the worst-case satisfaction probability
+        (the memoryless optimal strategy of :meth:`satisfaction`: inside the almost-sure
+        region it wins with probability 1, elsewhere it is optimal). -1 where no action is
+        allowed or the state is settled without one."""
+        return self.satisfaction(allowed=allowed).strategy.copy()
 
     def _inside_strategy(self, ec: EndComponent, rows: np.ndarray | None) -> np.ndarray:
         m = self.model
@@ -330,9 +361,10 @@ class ProductIMDP:
 
     def labelled_model(self) -> IMDP:
         """The product model with two extra labels for other tools: ``accept`` on the
-        states of the accepting end components (so ``Pmax=? [F "accept"]`` is the
-        satisfaction probability) and ``fail`` on the failure states."""
-        acc, fail = self.accepting_states(), self.failure_states()
+        almost-sure winning states (:meth:`winning_states`; ``Pmax=? [F "accept"]`` under
+        the worst case is the satisfaction probability whenever every satisfying run must
+        enter them, e.g. for co-safe formulas) and ``fail`` on the failure states."""
+        acc, fail = self.winning_states(), self.failure_states()
         for name in ("accept", "fail"):
             if name in self.model.propositions:
                 raise ProductError(f"the model already uses the label {name!r}")
@@ -359,3 +391,39 @@ class ProductIMDP:
     def component_actions(self, component: EndComponent) -> np.ndarray:
         """``(n_states, n_actions)`` mask of the component's actions."""
         return graph.actions_from_rows(self.model, component.row_mask(self.model.n_rows))
+
+
+@numba.njit(cache=True, nogil=True)
+def _product_layout(state_ptr, row_ptr, row_action, successor, lower, upper, delta, letters, nq):
+    """Rows and entries of the product, in the model's internal layout: per model state
+    ``s`` and automaton state ``q``, the rows of ``s`` with successors
+    ``t * nq + delta[q, letters[t]]``. Returns ``(row_state, row_action, row_ptr,
+    successor, lower, upper)``."""
+    n = state_ptr.size - 1
+    n_rows = (state_ptr[n] - state_ptr[0]) * nq
+    n_entries = 0
+    for s in range(n):
+        n_entries += (row_ptr[state_ptr[s + 1]] - row_ptr[state_ptr[s]]) * nq
+    p_state = np.empty(n_rows, dtype=np.int64)
+    p_action = np.empty(n_rows, dtype=np.int64)
+    p_ptr = np.empty(n_rows + 1, dtype=np.int64)
+    p_succ = np.empty(n_entries, dtype=np.int64)
+    p_lo = np.empty(n_entries)
+    p_up = np.empty(n_entries)
+    r_out = 0
+    e_out = 0
+    for s in range(n):
+        for q in range(nq):
+            for r in range(state_ptr[s], state_ptr[s + 1]):
+                p_state[r_out] = s * nq + q
+                p_action[r_out] = row_action[r]
+                p_ptr[r_out] = e_out
+                for e in range(row_ptr[r], row_ptr[r + 1]):
+                    t = successor[e]
+                    p_succ[e_out] = t * nq + delta[q, letters[t]]
+                    p_lo[e_out] = lower[e]
+                    p_up[e_out] = upper[e]
+                    e_out += 1
+                r_out += 1
+    p_ptr[n_rows] = e_out
+    return p_state, p_action, p_ptr, p_succ, p_lo, p_up

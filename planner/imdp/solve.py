@@ -13,10 +13,19 @@ Properties:
   the reward ``W`` is collected on *landing* in a state (docs/design.md).
 
 ``satisfaction="pessimistic"``: the adversary opposes the strategy (the worst case);
-``"optimistic"``: it helps. The stopping rule is ``max_s |V_k(s) - V_{k-1}(s)| < tolerance``
-(default 1e-8) for a sweep with the exact adversary; that difference is the reported
-residual. For discounted reward the error is at most ``gamma / (1 - gamma) * residual``;
-for reachability (iterating from below) the residual is the usual, not a guaranteed, bound.
+``"optimistic"``: it helps.
+
+**Certified values** (the default): :class:`Solution` carries ``lower <= V* <= upper`` at
+every state, and the solver stops when ``max(upper - lower) < tolerance`` (default 1e-8).
+For reachability ``V*`` is the least fixed point of the Bellman operator ``T``; ``lower``
+comes from sweeps from below (every iterate is a sound lower bound) and ``upper`` is a
+vector certified superharmonic, ``T(U) <= U``, which by Knaster-Tarski bounds the least
+fixed point from above (see ``_reach_sweeps``). A residual ``max |V_k - V_{k-1}|`` below
+the tolerance does not by itself bound the error (mass leaking slowly out of a
+near-end-component keeps the residual small while the values are still far off); the
+bracket does. For discounted reward the bracket is the contraction bound
+``gamma / (1 - gamma) * residual`` of an exact sweep. ``ValueIteration(certified=False)``
+is the fast uncertified mode: it stops on the residual alone.
 
 Reachability sweeps are Gauss-Seidel, state by state in order of graph distance to the
 value-1 states (a compiled kernel, :mod:`planner.imdp.kernels`): starting from
@@ -45,7 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.errors import SpecificationError
-from planner.imdp import graph
+from planner.imdp import certify, graph
 from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.model import IMDP, first_of_runs
@@ -188,9 +197,11 @@ class ValueIteration:
     """Robust value iteration with the state-ordering adversary.
 
     Args:
-        tolerance: stop when ``max |V_k - V_{k-1}| < tolerance`` (default 1e-8).
+        tolerance: the width of the certified bracket ``upper - lower`` at which to stop
+            (default 1e-8); with ``certified=False``, the residual ``max |V_k - V_{k-1}|``
+            at which to stop.
         max_iterations: give up after this many sweeps (the solution then reports
-            ``converged=False``).
+            ``converged=False`` and the bracket reached so far).
         callback: called as ``callback(iteration, residual)`` after every sweep.
         precompute: settle the states of (worst- or best-case) reachability probability
             0 and (worst case) 1 by graph analysis before iterating (default). Without it
@@ -200,6 +211,11 @@ class ValueIteration:
             response, then strict improvements) when the sweeps creep towards the
             tolerance (default). Without it plain sweeps can take millions of sweeps where
             mass leaks slowly out of near-end-components.
+        certified: bracket every value from below and above and stop when the bracket is
+            narrower than ``tolerance`` (default). ``certified=False`` is the fast
+            *uncertified* mode: it stops on the residual alone, which does not bound the
+            error (a slow leak can leave an error far above the residual); its ``upper``
+            is then the trivial bound.
     """
 
     tolerance: float = 1e-8
@@ -207,6 +223,7 @@ class ValueIteration:
     callback: Callable[[int, float], None] | None = None
     precompute: bool = True
     strategy_iteration: bool = True
+    certified: bool = True
 
     def __post_init__(self) -> None:
         if not self.tolerance > 0:
@@ -220,15 +237,26 @@ class Solution:
     """Result of :func:`solve`.
 
     Attributes:
-        values: ``(n_states,)`` optimal values.
+        values: ``(n_states,)`` values. Reachability: the sound lower bound of the bracket
+            (``values == lower``); every value is attained: the strategy reaches the
+            target with at least this probability against every adversary (or, for a
+            minimising strategy, the value is at most ``upper``). Discounted reward: the
+            centre of the bracket.
+        lower, upper: ``(n_states,)`` the certified bracket, ``lower <= V* <= upper`` for
+            the optimal values ``V*`` (up to floating-point rounding, ~1e-15). With the
+            uncertified mode ``upper`` is only the trivial bound (1 for reachability; for
+            discounted reward the residual bound, which is sound for that property).
         strategy: ``(n_states,)`` chosen action per state (-1: none; targets, avoided
             states, states settled by graph analysis and states without allowed actions).
         residual: the last ``max |V_k - V_{k-1}|`` (a sweep with the exact order).
-        iterations: the number of sweeps.
+        iterations: the number of sweeps (from below; the sweeps that check or tighten
+            the upper bound are counted in ``upper_sweeps``).
         evaluations: the number of exact strategy evaluations by strategy iteration
             (each: one or more sparse linear solves; 0 when the sweeps did not creep).
-        converged: whether ``residual < tolerance``.
+        converged: whether the stopping rule was met (certified: ``max(upper - lower) <
+            tolerance``; uncertified: ``residual < tolerance``).
         fixed: ``(n_states,)`` mask of the states whose value was set without iteration.
+        upper_sweeps: sweeps from above (verification of the upper bound).
         q_values: ``(n_rows,)`` robust value of every row under the final values
             (``nan`` for rows outside the allowed sub-model); computed on first access.
     """
@@ -240,8 +268,18 @@ class Solution:
     converged: bool = True
     evaluations: int = 0
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    upper_sweeps: int = 0
     _q: Callable[[], np.ndarray] | None = field(default=None, repr=False)
     _q_cache: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def error(self) -> float:
+        """``max(upper - lower)``: the certified error bound of ``values``."""
+        if self.upper.size == 0:
+            return float("inf")
+        return float(np.max(self.upper - self.lower))
 
     @property
     def q_values(self) -> np.ndarray:
@@ -311,17 +349,27 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
 
     sigma: np.ndarray | None = None
     evaluations = 0
+    upper_sweeps = 0
     if reward is None:
-        v, residual, it, sigma, evaluations, q_free = _reach_sweeps(
+        v, upper, residual, it, sigma, evaluations, q_free, upper_sweeps = _reach_sweeps(
             m, free_rows, fixed_val, adversary_minimizes, maximize, alg
+        )
+        lower = v.copy()
+        converged = (
+            bool(np.max(upper - lower, initial=0.0) < alg.tolerance)
+            if alg.certified
+            else bool(residual < alg.tolerance)
         )
     else:
         # discounted reward: Jacobi sweeps that tolerate successors out of order by less
-        # than tolerance / 100, then exact sweeps until the residual is small
+        # than tolerance / 100, then exact sweeps until the residual (certified: the
+        # contraction bound on the error) is small
         full = OrderingAdversary(
             m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
         )
         v, residual, it = fixed_val.copy(), 0.0, 0
+        factor = discount / (1.0 - discount)
+        goal = alg.tolerance / (2.0 * factor) if alg.certified and factor > 0 else alg.tolerance
         while free_rows.size and it < alg.max_iterations:
             it += 1
             q_free = full.expectation(backup(v))
@@ -331,11 +379,15 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
             v = v_new
             if alg.callback is not None:
                 alg.callback(it, residual)
-            if residual < alg.tolerance:
+            if residual < goal:
                 if full.resort_tolerance == 0.0:
                     break
                 full.resort_tolerance = 0.0
         q_free = full.expectation(backup(v)) if free_rows.size else np.zeros(0)
+        # ||V* - v|| <= gamma / (1 - gamma) * residual for an exact sweep (contraction)
+        err = np.where(fixed, 0.0, factor * residual)
+        lower, upper = v - err, v + err
+        converged = bool(residual < goal) and full.resort_tolerance == 0.0
     strategy = _strategy(m, free_rows, q_free, seg, seg_states, v, maximize, prop, alg.tolerance)
     if sigma is not None:
         # strategy iteration's strategy: its exact value is the least fixed point
@@ -357,9 +409,12 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         strategy=strategy,
         residual=residual,
         iterations=it,
-        converged=bool(residual < alg.tolerance),
+        converged=converged,
         fixed=fixed,
         evaluations=evaluations,
+        lower=lower,
+        upper=upper,
+        upper_sweeps=upper_sweeps,
         _q=all_q,
     )
 
@@ -382,29 +437,45 @@ def _reach_sweeps(
     adversary_minimizes: bool,
     maximize: bool,
     alg: ValueIteration,
-) -> tuple[np.ndarray, float, int, np.ndarray | None, int, np.ndarray]:
-    """Reachability value iteration from below: state-by-state Gauss-Seidel sweeps.
+) -> tuple[np.ndarray, np.ndarray, float, int, np.ndarray | None, int, np.ndarray, int]:
+    """Reachability value iteration from below, and a certified upper bound.
 
-    The free states are visited in order of their graph distance to the value-1 states
-    (targets, and states of worst-case value 1), each update reading the values written
-    before it in the same sweep (:class:`planner.imdp.kernels.ReachSweeper`, compiled), with
-    the exact adversary for the current values and ``max(old, new)``.
-    Starting from ``V_0 <= T(V_0)``, every update stays below the least fixed point and the
-    values only increase, which is what makes zero lower bounds and end components safe.
-    For a maximising strategy only every ``_FULL_EVERY``-th sweep evaluates all rows (and
-    records each state's best row); the sweeps between evaluate the recorded best rows only
-    (modified policy iteration: each such update is at most the full one, so it stays
-    sound; for a minimising strategy it would not be, and every sweep is full). The sweeps
-    stop when a full sweep changes no value by ``tolerance`` or more; that change is the
-    reported residual.
+    **From below**: state-by-state Gauss-Seidel sweeps. The free states are visited in
+    order of their graph distance to the value-1 states (targets, and states of worst-case
+    value 1), each update reading the values written before it in the same sweep
+    (:class:`planner.imdp.kernels.ReachSweeper`, compiled), with the exact adversary for the
+    current values and ``max(old, new)``. Starting from ``V_0 <= T(V_0)``, every update
+    stays below the least fixed point and the values only increase, which is what makes zero
+    lower bounds and end components safe. For a maximising strategy only every
+    ``_FULL_EVERY``-th sweep evaluates all rows (and records each state's best row); the
+    sweeps between evaluate the recorded best rows only (modified policy iteration: each
+    such update is at most the full one, so it stays sound; for a minimising strategy it
+    would not be, and every sweep is full).
 
-    Returns ``(values, residual, sweeps, strategy, evaluations, q)``: ``strategy`` is the
-    last strategy iteration's optimal strategy (one row per free state) or ``None``; ``q``
-    the robust value of every free row under the final values.
+    **From above** (``certified``): the value is the *least* fixed point of the Bellman
+    operator ``T`` (targets at 1), so by Knaster-Tarski every superharmonic ``U``
+    (``T(U) <= U``) is an upper bound; no end-component analysis is needed to *check* one.
+    When a full sweep from below changes no value by the current goal (``tolerance`` at
+    first), the candidate ``U = min(1, L + tolerance / 2)`` is checked by passes of
+    :func:`planner.imdp.kernels.upper_sweep` (optimistic value iteration, Hartmanns and
+    Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` certifies ``U``.
+    Candidates fail where the values from below still move (a slow leak, or mass that
+    circulates long among free states): then, for maximal reachability on at most
+    ``_SI_MAX_STATES`` free states, strategy iteration makes the values exact (the least
+    fixed point, at which the candidate passes), else the goal is divided by 8 and the
+    sweeps continue. After ``_OVI_TRIES`` failures
+    the upper bound is iterated from the trivial superharmonic ``U = 1`` instead, each
+    pass again a sound upper bound (it may stall above the value inside end components
+    that the opposing side can hold; the bracket then stays wide and ``converged`` is
+    ``False``).
+
+    Returns ``(lower, upper, residual, sweeps, strategy, evaluations, q, upper_sweeps)``:
+    ``strategy`` is the last strategy iteration's optimal strategy (one row per free
+    state) or ``None``; ``q`` the robust value of every free row under the final values.
     """
     v = fixed_val.copy()
     if free_rows.size == 0:
-        return v, 0.0, 0, None, 0, np.zeros(0)
+        return v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0
     dist = _layers(m, free_rows, fixed_val == 1.0)
     sweeper = ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)
     residual = 0.0
@@ -416,6 +487,11 @@ def _reach_sweeps(
     evaluations = 0
     history: list[tuple[int, float]] = []
     want_full = False
+    goal = alg.tolerance
+    upper: np.ndarray | None = None
+    upper_sweeps = 0
+    tries = 0
+    exacted = False
     while it < alg.max_iterations:
         it += 1
         check = it > next_eval
@@ -427,9 +503,39 @@ def _reach_sweeps(
             alg.callback(it, residual)
         if full:
             history.append((it, residual))
-        want_full = residual < alg.tolerance
+        want_full = residual < goal
         if want_full and full:
-            break
+            if not alg.certified:
+                break
+            u, passes = certify.optimistic_candidate(sweeper, v, alg.tolerance / 2)
+            upper_sweeps += passes
+            if u is None and use_si and not exacted and n_free <= _SI_MAX_STATES:
+                # make the values from below exact (the least fixed point), then check
+                exacted = True
+                x, sigma, rounds = _strategy_iteration(
+                    m,
+                    free_rows,
+                    v,
+                    fixed_val,
+                    adversary_minimizes,
+                    alg.tolerance,
+                    max_rounds=_CERTIFY_ROUNDS,
+                )
+                evaluations += rounds
+                if x is not None:
+                    v = np.maximum(v, x)
+                    u, passes = certify.optimistic_candidate(sweeper, v, alg.tolerance / 2)
+                    upper_sweeps += passes
+            if u is not None:
+                # the minimum of superharmonic vectors is superharmonic
+                upper = u if upper is None else np.minimum(upper, u)
+                if np.max(upper - v) < alg.tolerance:
+                    break
+            tries += 1
+            if tries >= _OVI_TRIES:
+                break
+            goal = max(goal / 8.0, _MIN_GOAL)
+            want_full = False
         if not check:
             continue
         next_eval *= 2
@@ -449,7 +555,31 @@ def _reach_sweeps(
             evaluations += rounds
         if x is not None:
             v = np.maximum(v, x)
-    return v, residual, it, sigma, evaluations, sweeper.row_values(v)
+    if upper is None:
+        upper = fixed_val.copy()
+        upper[sweeper.states] = 1.0
+    if alg.certified and np.max(upper - v) >= alg.tolerance:
+        # from a superharmonic U (at worst the trivial U = 1) every pass stays one
+        for _ in range(_FALLBACK_PASSES):
+            upper_sweeps += 1
+            sweeper.upper_pass(upper)
+            if np.max(upper - v) < alg.tolerance:
+                break
+    return v, upper, residual, it, sigma, evaluations, sweeper.row_values(v), upper_sweeps
+
+
+_OVI_TRIES = 3
+"""Failed candidates before the upper bound is iterated from 1 instead."""
+
+_FALLBACK_PASSES = 50
+"""Passes of the upper bound from the last certified vector (or ``U = 1``) when no
+candidate closed the bracket (each pass keeps it certified)."""
+
+_CERTIFY_ROUNDS = 12
+"""Strategy-improvement rounds spent on making the values exact for the certificate."""
+
+_MIN_GOAL = 1e-15
+"""The smallest residual goal the sweeps from below are driven to."""
 
 
 _LOCAL_FRACTION = 0.25
@@ -500,6 +630,7 @@ def _strategy_iteration(
     fixed_val: np.ndarray,
     adversary_minimizes: bool,
     tol: float,
+    max_rounds: int | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Robust strategy iteration for maximal reachability, started from the strategy
     greedy for ``v``.
@@ -528,7 +659,8 @@ def _strategy_iteration(
     sigma = choice[rs[seg]]
     slack = tol * 1e-2
     best: np.ndarray | None = None
-    for rounds in range(1, _MAX_IMPROVEMENTS + 1):
+    limit = _MAX_IMPROVEMENTS if max_rounds is None else max_rounds
+    for rounds in range(1, limit + 1):
         start = v if best is None else best
         x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start)
         if x is None:
@@ -545,7 +677,7 @@ def _strategy_iteration(
         top = np.flatnonzero(q >= q_best[seg_id])
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
-    return best, None, _MAX_IMPROVEMENTS
+    return best, None, limit
 
 
 def _strategy(

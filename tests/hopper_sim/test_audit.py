@@ -4,8 +4,16 @@ benchmarks/audit_intervals.py)."""
 import numpy as np
 import pytest
 
-from hopper_sim.audit import audit_intervals, collect_run_data, excluded_landings
+from hopper_sim.audit import (
+    audit_intervals,
+    collect_run_data,
+    excluded_landings,
+    loop_allowed_actions,
+    pool_velocities,
+)
 from hopper_sim.runner import NavigationRunner
+from planner.gp import LandingErrorGP
+from planner.learning import resynthesise
 from planner.scenario import load_scenario
 
 
@@ -20,6 +28,7 @@ def test_small_loop_like_audit_holds(run):
     runner, data = run
     assert len(data.positions) > 0 and data.errors.shape == data.positions.shape
     assert data.velocities.shape == (len(data.positions), 3)
+    assert data.actions.shape == (len(data.positions),) and data.actions.max() < 8
     grid = runner.grid
     cells = np.unique(grid.locate(data.positions[:4]))[:2]
     pairs = np.array([[c, a] for c in cells for a in np.flatnonzero(grid.enabled[c])])
@@ -56,3 +65,33 @@ def test_audit_rejects_bad_pairs(run):
         audit_intervals(
             runner, data, [[corner, ok], [corner, ok]], samples=1, rng=np.random.default_rng(0)
         )
+
+
+def test_velocities_are_pooled_over_runs(run):
+    runner, data = run
+    pooled = pool_velocities(runner, data, [3])
+    np.testing.assert_array_equal(pooled.positions, data.positions)
+    np.testing.assert_array_equal(pooled.velocities[: len(data.velocities)], data.velocities)
+    assert len(pooled.velocities) > len(data.velocities)
+
+
+def test_loop_allowed_actions_follow_the_phase(run):
+    runner, _ = run
+    sc, grid = runner.scenario, runner.grid
+    z = np.zeros((0, 2))
+    res = resynthesise(
+        LandingErrorGP(runner.gp_settings), grid, runner.automaton, z, z,
+        reward=runner.env.reward_table, initial_cell=sc.start_cell,
+        settings=runner.synthesis_settings,
+    )  # fmt: skip
+    allowed = loop_allowed_actions(res, grid, sc.p_sat)
+    assert (allowed <= grid.enabled[: grid.n_cells]).all()
+    for cell in range(grid.n_cells):
+        ps = res.product.entry_state(cell)
+        if res.satisfaction.values[ps] > sc.p_sat and res.goal.allowed[ps].any():
+            want = res.goal.allowed[ps]  # goal reaching
+        elif res.exploration.allowed[ps].any():
+            want = res.exploration.allowed[ps]
+        else:
+            want = grid.enabled[cell]  # fallback: every enabled action
+        np.testing.assert_array_equal(allowed[cell], want & grid.enabled[cell])

@@ -6,7 +6,7 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from hopper_sim.events import HopEvent, Observers, RunEnd, SynthesisEvent
+from hopper_sim.events import HopEvent, Observers, ResynthesisRecord, RunEnd, SynthesisEvent
 from hopper_sim.recording import RecordingError, RerunRecorder, scenario_record
 from hopper_sim.recording_reader import format_summary, read_runs, summarize_recording
 from planner.scenario import load_scenario
@@ -292,6 +292,34 @@ def test_recorder_keeps_new_event_fields(tmp_path: Path):
     assert run["outcome"] == "success"
     (chunk,) = _chunks(path, "/run_1/summary")
     assert chunk.to_record_batch().column("end_reason").to_pylist() == [["goal reached"]]
+
+
+def test_synthesis_reports_are_time_series_and_in_the_outcome(tmp_path: Path):
+    """Each synthesis's record (current P-check, fit values, chosen component) is logged."""
+    records = (
+        ResynthesisRecord(
+            0, 0.0, 0.0, 0, {"lengthscale": (1.5, 2.5), "noise": (0.01,)}, 12, 1.0, 3.5
+        ),
+        ResynthesisRecord(2, 0.875, 0.5, 2, {"lengthscale": (1.25, 2.0), "noise": (0.02,)}),
+    )
+    events = run_events(load_scenario("a"), 0, 3)
+    synth = next(e for e in events if isinstance(e, SynthesisEvent))
+    later = dataclasses.replace(synth, step=2, record=records[1])
+    events = [dataclasses.replace(e, record=records[0]) if e is synth else e for e in events]
+    events.insert(len(events) - 1, later)
+    events[-1] = dataclasses.replace(events[-1], resyntheses=records, collections=2)
+    path = tmp_path / "records.rrd"
+    with RerunRecorder(path) as rec:
+        feed(rec, events)
+    assert _column(path, "run_1/plots/p_worst_current", "Scalars:scalars") == [[0.0], [0.875]]
+    assert _column(path, "run_1/gp/fit/lengthscale", "Scalars:scalars") == [[1.5, 2.5], [1.25, 2.0]]
+    assert _column(path, "run_1/synthesis/num_data", "Scalars:scalars") == [[0.0], [2.0]]
+    assert _column(path, "run_1/synthesis/mec_states", "Scalars:scalars") == [[12.0], [0.0]]
+    assert _column(path, "run_1/synthesis/mec_probability", "Scalars:scalars") == [[1.0]]
+    (text,) = _column(path, "run_1/outcome", "TextDocument:text")
+    assert "0: 0.000, 2: 0.875" in text[0]
+    (chunk,) = _chunks(path, "/run_1/summary")
+    assert chunk.to_record_batch().column("collections").to_pylist() == [[2]]
 
 
 def test_gp_maps_are_images_with_y_up(recorded):

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from hopper_sim.environment import EnvSettings, EpisodeError, HopperGridEnv
-from hopper_sim.events import Observer
+from hopper_sim.events import HopEvent, Observer
 from hopper_sim.runner import NavigationRunner, automaton_sinks
 from planner.imdp.grid import ACTIONS
 from planner.ltl.translate import translate
-from planner.scenario import load_scenario
+from planner.scenario import load_scenario, parse_scenario, resolve_scenario_path
 
 
 class Collect(Observer):
@@ -125,12 +125,19 @@ def test_env_without_perturbations_lands_near_target(short_a, env):
 
 def test_unknown_reward_learner_carries_over(short_a, env):
     sc = dataclasses.replace(short_a, reward_known=False).with_runner(max_steps=6)
-    runner = NavigationRunner(sc, env=env)
+    cells: dict[int, set[int]] = {}
+
+    class Landings(Observer):
+        def on_hop(self, event: HopEvent) -> None:
+            cells.setdefault(event.run_index, set()).add(event.cell)
+
+    runner = NavigationRunner(sc, env=env, observer=Landings())
     ends = runner.run_many(2, seed=5)
     assert [e.run_index for e in ends] == [0, 1]
     assert runner.learner is not None
-    landed = sum(e.steps - e.reason.startswith("hop failed") for e in ends)
-    assert runner.learner.reward_count.sum() == landed
+    # the scenario pays once: the learner sees each run's first landing in a cell, once
+    assert sc.collect == "once"
+    assert runner.learner.reward_count.sum() == sum(len(c) for c in cells.values())
 
 
 @pytest.mark.parametrize("seed", [16, 18])
@@ -147,3 +154,61 @@ def test_goal_plan_of_the_switch_is_followed_to_the_goal(seed):
     hops = [e for k, e in obs.events if k == "hop"]
     assert {h.phase for h in hops[end.switch_step :]} == {"goal_reaching"}
     assert end.outcome == "success"
+
+
+def _a_paying_everywhere_left_of_the_wall(collect: str):
+    text = resolve_scenario_path("a").read_text()
+    text = text.replace(
+        "[rewards]", "[regions.left]\nrects = [[0.0, 0.0, 7.0, 15.0]]\n\n[rewards]\nleft = 1.0"
+    )
+    return dataclasses.replace(parse_scenario(text), collect=collect)
+
+
+@pytest.mark.parametrize("collect", ["once", "every"])
+def test_env_pays_a_cell_once_per_episode_or_every_time(collect, env):
+    sc = _a_paying_everywhere_left_of_the_wall(collect)
+    quiet = HopperGridEnv(
+        sc,
+        model=env.model,
+        controller=env.controller,
+        settings=EnvSettings(terrain=False, noise=False),
+    )
+    grid, table = quiet.grid, quiet.reward_table
+    rng = np.random.default_rng(0)
+    repeats = 0
+    for episode in range(2):
+        obs, _ = quiet.reset(seed=episode)
+        seen: set[int] = set()
+        for _ in range(25):  # a random walk that stays in x < 6, 3 <= y < 12
+            tc = grid.target_cell[obs["cell"]]
+            i, j = np.divmod(np.where(tc >= 0, tc, 0), grid.ny)
+            ok = (tc >= 0) & (i < 6) & (j >= 3) & (j < 12)
+            obs, reward, terminated, _, info = quiet.step(int(rng.choice(np.flatnonzero(ok))))
+            cell = obs["cell"]
+            assert info["first_landing"] == (cell not in seen) and not terminated
+            paid = cell not in seen or collect == "every"
+            assert reward == (table[cell] if paid else 0.0) and table[cell] > 0.0
+            repeats += cell in seen
+            seen.add(cell)
+        assert set(np.flatnonzero(quiet.collected)) == seen  # a new episode pays again
+    assert repeats >= 5
+
+
+def test_run_reports_every_synthesis_and_pays_each_cell_once(short_a, env):
+    obs = Collect()
+    end = NavigationRunner(short_a, env=env, observer=obs).run(seed=7)
+    synths = [e for k, e in obs.events if k == "synthesis"]
+    assert [r.step for r in end.resyntheses] == [e.step for e in synths]
+    assert all(e.record is r for e, r in zip(synths, end.resyntheses, strict=True))
+    for r in end.resyntheses:
+        assert 0.0 <= r.p_worst_current <= 1.0 and 0.0 <= r.p_worst_initial <= 1.0
+        assert r.gp and all(len(v) >= 1 for v in r.gp.values())  # the fit's hyperparameters
+        assert r.num_data == r.step and r.mec_states > 0
+    assert end.p_worst_trace == tuple(r.p_worst_current for r in end.resyntheses)
+    hops = [e for k, e in obs.events if k == "hop"]
+    seen: set[int] = set()
+    table = env.reward_table
+    for h in hops:
+        assert h.reward == (table[h.cell] if h.cell not in seen else 0.0)
+        seen.add(h.cell)
+    assert end.collections == sum(table[c] != 0 for c in seen)

@@ -8,9 +8,14 @@ from planner.gp import FitSettings, LandingErrorGP
 from planner.imdp import IMDP
 from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import ResynthesisSettings, frontier_strategy, resynthesise
+from planner.learning import (
+    ResynthesisSettings,
+    frontier_strategy,
+    replan_reward,
+    resynthesise,
+)
 from planner.policy import FALLBACK, GOAL_REACHING, SwitchingPolicy, SwitchingSettings
-from planner.qlearning import QLearningSettings, RobustQLearner
+from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
 from tests.planner.conftest import smooth_error
 from tests.planner.imdp.helpers import until_automaton
 
@@ -32,10 +37,10 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
     grid, w = _world()
     rng = np.random.default_rng(seed)
     noise = TruncatedGaussianNoise()
-    gp = LandingErrorGP(FitSettings(steps=5, cold_steps=20), seed=seed)
+    gp = LandingErrorGP(FitSettings(bias_std=0.1))
     settings = ResynthesisSettings(beta=3.0, q_tolerance=1e-4)
     policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02))
-    pos, err = np.zeros((0, 2)), np.zeros((0, 2))
+    pos, err, acts = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int)
     xy = np.array([1.5, 1.5])
     cell = int(grid.locate(xy))
     ps, r = None, None
@@ -44,7 +49,7 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
         if step % batch == 0:
             kw = {"reward": w} if learner is None else {"learner": learner}
             r = resynthesise(
-                gp, grid, until_automaton(), pos, err, initial_cell=cell,
+                gp, grid, until_automaton(), pos, err, actions=acts, initial_cell=cell,
                 current_state=ps, settings=settings, previous=r, **kw,
             )  # fmt: skip
             ps = r.product.entry_state(cell) if ps is None else ps
@@ -53,6 +58,7 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
         target = grid.target_centres[cell, d.action]
         land = target + 0.6 * smooth_error(xy[None])[0] + noise.sample(rng, 2)
         pos, err = np.vstack([pos, xy]), np.vstack([err, land - target])
+        acts = np.append(acts, d.action)
         nxt = int(grid.locate(land))
         if learner is not None:
             nps = r.product.step(ps, nxt)
@@ -106,6 +112,11 @@ def test_prior_start_in_a_corner_falls_back():
         policy.decide(corner, np.random.default_rng(0))
     with pytest.raises(PolicyError, match="exactly one"):
         resynthesise(gp, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)))
+    with pytest.raises(PolicyError, match="3 hops given without their executed actions"):
+        resynthesise(gp, grid, until_automaton(), np.ones((3, 2)), np.zeros((3, 2)), reward=w)
+    other = LandingErrorGP(FitSettings(noise=TruncatedGaussianNoise(0.2, 0.4)))
+    with pytest.raises(PolicyError, match="landing noise"):
+        resynthesise(other, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)), reward=w)
 
 
 def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
@@ -130,8 +141,9 @@ def test_exploration_candidates_setting():
                      initial_cell=9, settings=settings)  # fmt: skip
     assert r.mec is not None
     assert r.nonviolating.states[r.mec.component.states].all()
+    accepting = ResynthesisSettings(beta=3.0, candidates="accepting")
     r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                      initial_cell=9, settings=ResynthesisSettings(beta=3.0))  # fmt: skip
+                      initial_cell=9, settings=accepting)  # fmt: skip
     assert r2.mec is not None
     assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
     with pytest.raises(PolicyError, match="candidates"):
@@ -172,3 +184,59 @@ def test_fallback_never_aims_at_a_hazard_when_another_hop_does_not():
             assert grid.enabled[cell, act] and not haz[grid.target_cell[cell, act]], (cell, act)
             checked += 1
     assert checked >= 3
+
+
+def test_default_exploration_tours_the_best_nonviolating_component():
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    # a narrow prior (the error well known): the start's component is surely reachable
+    narrow = FitSettings(bias_std=0.02, field_std=0.02, residual_std=0.02)
+    r = resynthesise(LandingErrorGP(narrow), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=ResynthesisSettings(beta=0.5))  # fmt: skip
+    assert r.mec is not None and r.tour is not None and r.mec.probability == 1.0
+    start = r.product.entry_state(9)
+    comp = r.mec.component
+    assert r.nonviolating.states[comp.states].all()
+    assert start in comp.states  # sure to reach itself; ties go to the current component
+    # the tour starts towards the rewarding cells, not along the lowest-index action
+    target = r.tour.targets(start, np.full(r.product.n_states, -1))
+    cells = set(r.product.base_state[np.flatnonzero(target)].tolist())
+    assert cells == set(np.flatnonzero(w > 0).tolist())
+
+
+def test_collected_cells_are_worth_nothing_to_the_plan():
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    settings = ResynthesisSettings(beta=0.5, q_tolerance=1e-9)
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=settings)  # fmt: skip
+    assert r.q.values.max() > 0  # tight intervals: the rewards count
+    done = np.zeros(grid.n_states, dtype=bool)
+    done[np.flatnonzero(w > 0)] = True
+    q, rl, tour = replan_reward(r, reward=w, collected=done, settings=settings)
+    np.testing.assert_allclose(q.values, 0.0, atol=1e-6)  # warm start from above
+    assert tour is not None and not (tour.reward > 0).any()
+    assert isinstance(rl, GreedyQ) and np.array_equal(rl.q, np.nan_to_num(q.q, nan=-np.inf))
+    same, _, _ = replan_reward(r, reward=w, settings=settings)
+    np.testing.assert_allclose(same.values, r.q.values, atol=1e-6)
+    r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                      initial_cell=9, collected=done, settings=settings)  # fmt: skip
+    np.testing.assert_allclose(r2.q.values, 0.0, atol=1e-9)
+    assert not (r2.product.reward > 0).any()
+    with pytest.raises(PolicyError, match="collected"):
+        replan_reward(r, reward=w, collected=done[:3])
+
+
+def test_no_reward_is_planned_after_the_run_ends():
+    # rewards reachable only after the goal (in the accepting part of the product) must not
+    # pull the plan into the goal: the run ends there
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=ResynthesisSettings(beta=0.5))  # fmt: skip
+    p = r.product
+    table = p.automaton.transitions
+    sink = (table == np.arange(p.n_q)[:, None]).all(axis=1)[p.automaton_state]
+    assert sink.any() and not r.q_allowed[sink].any()
+    np.testing.assert_allclose(r.q.values[sink], 0.0)
+    assert r.q.values[~sink].max() > 0

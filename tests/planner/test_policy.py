@@ -13,7 +13,8 @@ from planner.policy import (
     SwitchingPolicy,
     SwitchingSettings,
 )
-from planner.qlearning import QLearningSettings, RobustQLearner
+from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
+from planner.tour import ComponentTour
 
 N, K = 30, 8
 
@@ -169,3 +170,52 @@ def test_bad_plans_and_calls():
     policy.resynthesise(empty, plan, np.zeros(3))
     with pytest.raises(PolicyError, match="state 1 has no allowed action"):
         policy.decide(1, np.random.default_rng(0))
+
+
+def test_rl_ties_take_the_ltl_action():
+    # a reward that is indifferent (all Q equal, e.g. robust Q-values 0 under wide intervals)
+    # must not pull the RL action to the lowest-index action
+    rng = np.random.default_rng(0)
+    explore, goal = _plan(rng, 0.6), _plan(rng, 0.3)
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=1.0), GreedyQ(np.zeros((N, K))))
+    policy.resynthesise(explore, goal, np.zeros(N))
+    for s in np.flatnonzero(explore.ltl_action >= 0):
+        d = policy.decide(int(s), rng)
+        assert d.source == RL and d.action == explore.ltl_action[s]
+
+
+def test_exploration_follows_the_tour_inside_its_component_and_remembers_visits():
+    from planner.imdp.graph import EndComponent
+    from tests.planner.test_tour import _grid
+
+    model = _grid()  # 25 states, 4 actions, deterministic moves
+    n = model.n_states
+    comp = EndComponent(np.arange(n), np.arange(model.n_rows))
+    tour = ComponentTour(
+        model, comp, model.enabled, np.arange(n), np.zeros(n), np.zeros(n), "coverage"
+    )
+    static = PhasePlan(model.enabled.copy(), np.argmax(model.enabled, axis=1))  # lowest index
+    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
+    policy.resynthesise(static, static, np.zeros(n), tour=tour)
+    rng = np.random.default_rng(0)
+    s, seen = 12, {12}
+    for _ in range(40):
+        d = policy.decide(s, rng)
+        assert d.source == LTL and model.enabled[s, d.action]
+        s = int(model.successor[model.row_ptr[model.row_index[s, d.action]]])
+        seen.add(s)
+    assert seen == set(range(n))
+    assert policy.last_visit is not None and (policy.last_visit >= 0).sum() == n
+    policy.replan_reward(GreedyQ(np.ones((n, 4))))
+    assert policy.exploration is not None and policy.exploration.tour is tour
+    policy.reset()
+    assert (policy.last_visit == -1).all()
+    # without the tour the static plan shuttles between two states
+    plain = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
+    plain.resynthesise(static, static, np.zeros(n))
+    s, seen = 12, {12}
+    for _ in range(40):
+        a = plain.decide(s, rng).action
+        s = int(model.successor[model.row_ptr[model.row_index[s, a]]])
+        seen.add(s)
+    assert len(seen) < n

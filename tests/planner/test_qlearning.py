@@ -235,3 +235,36 @@ def test_a_table_without_digest_is_refused(tmp_path):
         np.savez(f, **_valid_arrays())
     with pytest.raises(QTableError, match="without a digest"):
         RobustQLearner.load(path)
+
+
+def test_greedy_ties_go_to_the_preferred_action_else_to_the_generator():
+    q = np.array([1.0, 3.0, 3.0 - 1e-9, np.nan, 3.0])
+    allowed = np.array([True, True, True, True, False])
+    assert greedy_action(q, allowed) == 1  # deterministic without a generator
+    assert greedy_action(q, allowed, prefer=2) == 2  # within the tie tolerance
+    assert greedy_action(q, allowed, prefer=0) == 1  # not among the best: ignored
+    picks = {greedy_action(q, allowed, rng=np.random.default_rng(s)) for s in range(40)}
+    assert picks == {1, 2}  # ties drawn, never the allowed-but-worse or disallowed ones
+    flat = np.zeros(5)
+    assert greedy_action(flat, allowed, prefer=3) == 3
+    assert GreedyQ(np.zeros((1, 5))).act(0, allowed, np.random.default_rng(0), prefer=2) == 2
+    learner = RobustQLearner(1, 5, 1, settings=QLearningSettings(epsilon=0.0))
+    assert learner.act(0, allowed, np.random.default_rng(0), prefer=3) == 3
+
+
+def test_collected_cells_count_zero_in_the_plan_but_keep_their_learned_reward():
+    model = _ring()
+    learner = RobustQLearner(3, 2, 3, settings=QLearningSettings(discount=0.5, prior_reward=0.0))
+    learner.observe_reward(2, 4.0)
+    before = learner.sweep(model, tolerance=1e-12).values.copy()
+    learner.collected[2] = True
+    np.testing.assert_allclose(learner.cell_reward(), [0.0, 0.0, 4.0])
+    np.testing.assert_allclose(learner.state_reward(), [0.0, 0.0, 0.0])
+    after = learner.sweep(model, tolerance=1e-12).values
+    assert (after < before - 1e-6).all() and np.allclose(after, 0.0)
+    # a repeat landing teaches nothing about the reward, yet updates Q
+    learner.collected[:] = False
+    q = learner.update(model, 1, 0, 2, 0.0, learn_reward=False)
+    assert learner.reward_count[2] == 1 and q > 0.0
+    with pytest.raises(QTableError, match="state 7"):
+        learner.update(model, 1, 0, 7, 0.0, learn_reward=False)

@@ -271,3 +271,13 @@ def test_example_user_scenario_loads():
     assert "c charger" in text and "o coin" in text
     rows = text.splitlines()[:12]
     assert rows[12 - 1 - 8][12] == "c" and rows[12 - 1 - 9][16] == "o"
+
+
+def test_collect_setting():
+    assert parse_scenario(BASE).collect == "once"
+    text = BASE.replace('formula = "!Haz U Goal"', 'formula = "!Haz U Goal"\ncollect = "every"')
+    assert parse_scenario(text).collect == "every"
+    bad = BASE.replace('formula = "!Haz U Goal"', 'formula = "!Haz U Goal"\ncollect = "twice"')
+    err = _error(bad, ScenarioValueError)
+    assert err.key == "collect" and err.line == _line(bad, "collect") and "twice" in str(err)
+    assert all(load_scenario(n).collect == "once" for n in SHIPPED_SCENARIOS)

@@ -24,8 +24,10 @@ def test_solve_json(model_file, capsys):
     m, path = model_file
     assert main(["imdp", "solve", str(path), "--target", "goal", "--avoid", "bad", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert set(out) == {"values", "residual", "iterations"}
+    assert set(out) == {"values", "lower", "upper", "converged", "residual", "iterations"}
     assert len(out["values"]) == m.n_states and out["residual"] < 1e-8
+    assert out["converged"] and out["values"] == out["lower"]
+    assert all(0 <= hi - lo < 1e-8 for lo, hi in zip(out["lower"], out["upper"], strict=True))
     assert (
         main(
             [

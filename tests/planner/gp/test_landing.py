@@ -4,89 +4,185 @@ import numpy as np
 import pytest
 
 from planner.errors import GPDataError
-from planner.gp import ErrorPredictor, FitSettings, LandingErrorGP
-from tests.planner.conftest import smooth_error
+from planner.gp import ErrorPredictor, FitSettings, LandingErrorGP, TruncatedGaussianNoise
+from tests.planner.conftest import action_error
+
+SETTINGS = FitSettings(bias_std=0.3, field_std=0.15)
 
 
-def test_prior_without_data_is_wide_and_centred():
-    gp = LandingErrorGP(FitSettings(prior_std=0.4))
+def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, d: int):
+    """The exact GP posterior of axis d at (pts, every action), from the full kernel matrix."""
+    s = settings
+    u = np.asarray(s.coupled, dtype=float)[:, d]
+    own = s.field_std**2 * (1.0 - s.field_correlation * u)
+    w = s.field_std * np.sqrt(s.field_correlation) * u
+
+    def cov(x1, a1, x2, a2):
+        k = np.exp(-0.5 * ((x1[:, None, :] - x2[None, :, :]) ** 2).sum(-1) / s.lengthscale**2)
+        same = a1[:, None] == a2[None, :]
+        return (np.outer(w[a1], w[a2]) + own[a1][:, None] * same) * k + s.bias_std**2 * same
+
+    noise = gp.residual_std()[act, d] ** 2 + s.noise.std**2
+    kxx = cov(pos, act, pos, act) + np.diag(noise)
+    y = err[:, d] - s.bias[act, d]
+    means, stds = [], []
+    for a in range(s.n_actions):
+        qa = np.full(len(pts), a)
+        ks = cov(pts, qa, pos, act)
+        means.append(s.bias[a, d] + ks @ np.linalg.solve(kxx, y))
+        var = s.field_std**2 + s.bias_std**2 - (ks * np.linalg.solve(kxx, ks.T).T).sum(1)
+        stds.append(np.sqrt(var))
+    return np.stack(means, 1), np.stack(stds, 1)
+
+
+def test_prior_without_data_is_wide_and_centred_on_the_bias():
+    bias = np.zeros((8, 2))
+    bias[3, 0] = -0.2
+    gp = LandingErrorGP(FitSettings(bias_mean=bias, bias_std=0.4, field_std=0.3))
     assert isinstance(gp, ErrorPredictor)
     mean, std = gp.predict(np.array([[0.5, 0.5], [7.0, 3.0]]))
-    np.testing.assert_allclose(mean, 0.0)
-    np.testing.assert_allclose(std, 0.4, rtol=1e-6)
-    np.testing.assert_allclose(gp.variation(np.array([0.1, 0.1]))[0], 0.0)
+    assert mean.shape == std.shape == (2, 8, 2)
+    np.testing.assert_allclose(mean, np.broadcast_to(bias, mean.shape))
+    np.testing.assert_allclose(std, 0.5, rtol=1e-12)
+    dmean, dstd = gp.variation(np.array([[0.5, 0.5]]), np.array([0.1, 0.1]))
+    np.testing.assert_allclose(dmean, 0.0)
+    assert dmean.shape == (1, 8, 2) and dstd.shape == (8, 2) and (dstd > 0).all()
+    np.testing.assert_allclose(gp.residual_std(), 0.1)
 
 
-def test_fit_learns_the_error_field(fitted_gp):
-    grid = np.random.default_rng(11).uniform(1.0, 14.0, size=(500, 2))
-    mean, std = fitted_gp.predict(grid)
-    assert np.abs(mean - smooth_error(grid)).mean() < 0.05
-    assert std.max() < 0.15
-    assert fitted_gp.num_data == 600
-    assert fitted_gp.model.inducing_points.shape == (2, 50, 2)
+def test_posterior_is_the_exact_gp_posterior(synthetic_data):
+    pos, err, act = (a[:120] for a in synthetic_data)
+    gp = LandingErrorGP(SETTINGS)
+    gp.fit(pos, err, act)
+    pts = np.random.default_rng(2).uniform(-2.0, 17.0, size=(9, 2))
+    mean, std = gp.predict(pts)
+    for d in range(2):
+        m_ref, s_ref = _brute_force(SETTINGS, gp, pos, err, act, pts, d)
+        np.testing.assert_allclose(mean[:, :, d], m_ref, atol=1e-9)
+        np.testing.assert_allclose(std[:, :, d], s_ref, atol=1e-5)  # single precision
 
 
-def test_same_seed_same_fit(synthetic_data):
-    pts = np.array([[1.0, 2.0], [10.0, 12.5]])
-    out = []
-    for _ in range(2):
-        gp = LandingErrorGP(FitSettings(steps=5, cold_steps=5), seed=4)
-        gp.fit(*synthetic_data)
-        out.append(gp.predict(pts))
-    np.testing.assert_array_equal(out[0][0], out[1][0])
-    np.testing.assert_array_equal(out[0][1], out[1][1])
+def test_direction_aware_model_recovers_a_field_that_differs_per_action():
+    rng = np.random.default_rng(0)
+    n = 1200
+    pos = rng.uniform(0.0, 15.0, size=(n, 2))
+    act = rng.integers(0, 8, size=n)
+    err = action_error(pos, act) + rng.normal(0.0, 0.1, size=pos.shape)
+    settings = FitSettings(bias_std=0.3, field_std=0.15, max_data=n)
+    gp = LandingErrorGP(settings)
+    gp.fit(pos, err, act)
+    g = np.linspace(1.0, 14.0, 27)
+    dense = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    mean, std = gp.predict(dense)
+    truth = np.stack([action_error(dense, np.full(len(dense), a)) for a in range(8)], axis=1)
+    # each action's posterior mean is within 0.05 m of its own field (RMS over the grid,
+    # per axis), and nowhere further than 4 posterior stds
+    rms = np.sqrt(((mean - truth) ** 2).mean(axis=0))
+    assert (rms < 0.05).all(), rms
+    assert (np.abs(mean - truth) < 4.0 * std).all()
+    # the actions really differ: one field for all actions (the old position-only model)
+    # is off by far more
+    pooled = LandingErrorGP(settings)
+    pooled.fit(pos, err, np.zeros(n, dtype=int))
+    one = pooled.predict(dense)[0][:, :1, :]
+    assert np.sqrt(((one - truth) ** 2).mean(axis=0)).max() > 0.15
 
 
-def test_refit_is_warm_started_and_reset_forgets(synthetic_data):
-    gp = LandingErrorGP(FitSettings(steps=3, cold_steps=8))
-    calls: list[int] = []
-    first = gp.fit(*synthetic_data, on_step=lambda step, loss: calls.append(step))
-    second = gp.fit(*synthetic_data, on_step=lambda step, loss: calls.append(step))
-    assert calls == [*range(8), *range(3)]  # cold fit, then a warm refit
-    assert not np.allclose(first.lengthscale, FitSettings().lengthscale)
-    gp.settings = FitSettings(steps=0)
-    third = gp.fit(*synthetic_data)
-    np.testing.assert_allclose(third.lengthscale, second.lengthscale)
-    np.testing.assert_allclose(third.outputscale, second.outputscale)
-    gp.reset()
+def test_posterior_std_only_shrinks_as_data_are_added(synthetic_data):
+    pos, err, act = synthetic_data
+    # residual variances held at the prior guess (huge pseudo-count): the kernel is fixed
+    gp = LandingErrorGP(FitSettings(residual_count=1e12))
+    pts = np.random.default_rng(3).uniform(0.0, 15.0, size=(200, 2))
+    last = gp.predict(pts)[1]
+    for n in (50, 100, 200, 400, 600):
+        gp.fit(pos[:n], err[:n], act[:n])
+        std = gp.predict(pts)[1]
+        assert (std <= last + 1e-12).all()
+        last = std
+    assert last.max() < SETTINGS.prior_std()
+
+
+def test_variation_bounds_hold_on_random_pairs(fitted_gp):
+    rng = np.random.default_rng(5)
+    h = np.array([0.1, 0.1])
+    a = rng.uniform(0.0, 15.0, size=(3000, 2))
+    b = a + rng.uniform(-1.0, 1.0, size=a.shape) * h
+    dmean, dstd = fitted_gp.variation(a, h)
+    ma, sa = fitted_gp.predict(a)
+    mb, sb = fitted_gp.predict(b)
+    assert (np.abs(ma - mb) <= dmean + 1e-9).all()
+    assert (np.abs(sa - sb) <= dstd + 1e-6).all()
+    # and the bounds are not vacuous: the mean's within a factor 3 of the largest change
+    # seen at its point's corners, on average
+    signs = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+    corners = [fitted_gp.predict(a + np.array(c) * h)[0] for c in signs]
+    seen = np.max([np.abs(c - ma) for c in corners], axis=0)
+    assert dmean.mean() < 3.0 * seen.mean()
+
+
+def test_residual_std_is_estimated_per_action():
+    rng = np.random.default_rng(4)
+    n = 1600
+    pos = rng.uniform(0.0, 15.0, size=(n, 2))
+    act = rng.integers(0, 8, size=n)
+    true_res = np.where(np.arange(8) % 2 == 1, 0.12, 0.03)[:, None] * np.ones((1, 2))
+    nu = TruncatedGaussianNoise().sample(rng, (n, 2))
+    err = action_error(pos, act) + nu + rng.normal(0.0, 1.0, size=(n, 2)) * true_res[act]
+    gp = LandingErrorGP(SETTINGS)
+    report = gp.fit(pos, err, act)
+    est = gp.residual_std()
+    np.testing.assert_array_equal(report.residual_std, est)
+    np.testing.assert_array_equal(report.per_action, np.bincount(act, minlength=8))
+    long = np.arange(8) % 2 == 1
+    assert (np.abs(est[long] - 0.12) < 0.03).all(), est
+    assert (est[~long] < 0.07).all(), est
+
+
+def test_old_data_beyond_max_data_are_dropped(synthetic_data):
+    pos, err, act = synthetic_data
+    gp = LandingErrorGP(FitSettings(max_data=100))
+    assert gp.fit(pos, err, act).num_data == 100
+    ref = LandingErrorGP(FitSettings(max_data=100))
+    ref.fit(pos[-100:], err[-100:], act[-100:])
+    pts = np.array([[3.0, 4.0], [12.0, 1.0]])
+    np.testing.assert_allclose(gp.predict(pts)[0], ref.predict(pts)[0])
+
+
+def test_empty_data_returns_to_prior(synthetic_data):
+    gp = LandingErrorGP()
+    gp.fit(*synthetic_data)
+    gp.fit(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int))
     assert gp.num_data == 0
-    np.testing.assert_allclose(gp.predict(np.zeros((1, 2)))[1], FitSettings().prior_std)
-
-
-def test_warm_up_leaves_the_prior():
-    gp = LandingErrorGP()
-    gp.warm_up()
-    assert gp.num_data == 0
-    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], FitSettings().prior_std)
-
-
-def test_few_points_use_them_as_inducing_points():
-    gp = LandingErrorGP()
-    pos = np.array([[1.0, 1.0], [2.0, 1.5], [1.0, 1.0]])
-    report = gp.fit(pos, np.full((3, 2), 0.1))
-    assert report.num_inducing == 2
-    assert np.isfinite(gp.predict(pos)[0]).all()
-
-
-def test_empty_data_returns_to_prior():
-    gp = LandingErrorGP()
-    gp.fit(np.zeros((0, 2)), np.zeros((0, 2)))
-    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], FitSettings().prior_std)
+    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], FitSettings().prior_std())
 
 
 @pytest.mark.parametrize(
-    ("pos", "err", "match"),
+    ("pos", "err", "act", "match"),
     [
-        (np.zeros((3, 3)), np.zeros((3, 3)), r"positions must have shape \(N, 2\)"),
-        (np.zeros((3, 2)), np.zeros((2, 2)), "errors must have shape"),
-        (np.zeros((3, 2)), np.array([[0, 0], [0, np.nan], [0, 0]]), "errors .* row 1"),
+        (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3, int), r"positions must have shape"),
+        (np.zeros((3, 2)), np.zeros((2, 2)), np.zeros(3, int), "errors must have shape"),
+        (np.zeros((3, 2)), np.zeros((3, 2)), np.zeros(2, int), r"actions must have shape \(3,\)"),
+        (np.zeros((3, 2)), np.zeros((3, 2)), np.array([0, 8, 1]), "row 1"),
+        (np.zeros((3, 2)), np.zeros((3, 2)), np.array([0.0, 1.5, 1]), "integers"),
+        (np.zeros((3, 2)), np.array([[0, 0], [0, np.nan], [0, 0]]), np.zeros(3, int), "row 1"),
     ],
 )
-def test_bad_data_is_rejected(pos, err, match):
+def test_bad_data_is_rejected(pos, err, act, match):
     with pytest.raises(GPDataError, match=match):
-        LandingErrorGP().fit(pos, err)
+        LandingErrorGP().fit(pos, err, act)
 
 
-def test_bad_settings_are_rejected():
-    with pytest.raises(GPDataError, match="prior_std"):
-        FitSettings(prior_std=-1.0)
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"lengthscale": 0.0}, "lengthscale"),
+        ({"bias_std": -1.0}, "bias_std"),
+        ({"field_correlation": 1.5}, "field_correlation"),
+        ({"residual_std": np.ones((3, 2))}, "residual_std"),
+        ({"bias_mean": np.full((8, 2), np.nan)}, "bias_mean"),
+        ({"coupled": np.ones((8, 3), bool)}, "coupled"),
+    ],
+)
+def test_bad_settings_are_rejected(kwargs, match):
+    with pytest.raises(GPDataError, match=match):
+        FitSettings(**kwargs)

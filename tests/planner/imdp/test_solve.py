@@ -288,3 +288,91 @@ def test_local_strategy_iteration_on_a_slow_corner(monkeypatch):
     plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
     slow = solve(Problem(m, Specification(ReachAvoid("g"))), plain)
     assert np.all(slow.values[2 + n_fast :] < 0.01) and slow.evaluations == 0
+
+
+def _leaky_loop(leak: float) -> IMDP:
+    """State 2 keeps ``1 - 3 leak .. 1 - leak`` on itself and leaks to the goal (1) with
+    ``[leak, 2 leak]`` and to the sink (0) with ``[0, 2 leak]``: worst case 1/3."""
+    return IMDP(
+        3,
+        [0, 1, 2, 2, 2],
+        [0] * 5,
+        [0, 1, 1, 0, 2],
+        [1, 1, leak, 0, 1 - 3 * leak],
+        [1, 1, 2 * leak, 2 * leak, 1 - leak],
+        labels=[(), ("g",), ()],
+    )
+
+
+def test_residual_rule_stops_far_from_the_value_but_the_bracket_does_not():
+    # the issue's stopping case in miniature: the residual drops below 1e-8 while the
+    # values are still 5e-4 short (V_k = (1 - (1 - 3e-5)^k) / 3 from below)
+    m = _leaky_loop(1e-5)
+    problem = Problem(m, Specification(ReachAvoid("g")))
+    fast = solve(problem, ValueIteration(certified=False, strategy_iteration=False))
+    assert fast.residual < 1e-8 and fast.converged
+    assert 1 / 3 - fast.values[2] > 1e-6  # the uncertified answer is off by far more
+    sol = solve(problem)  # default: certified
+    assert sol.converged and sol.error < 1e-8
+    assert sol.lower[2] <= 1 / 3 <= sol.upper[2]
+    assert sol.values.tolist() == sol.lower.tolist()
+    # certified without strategy iteration: the bracket stays honest (wide) when capped
+    capped = solve(problem, ValueIteration(max_iterations=2000, strategy_iteration=False))
+    assert not capped.converged
+    assert capped.lower[2] <= 1 / 3 <= capped.upper[2]
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+@pytest.mark.parametrize("strategy", ["maximize", "minimize"])
+def test_certified_bracket_contains_reference(zero_lower, sat, strategy):
+    rng = np.random.default_rng(101 if zero_lower else 102)
+    for _ in range(3):
+        m = random_imdp(rng, n_states=20, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+        spec = Specification(ReachAvoid("goal", "bad"), sat, strategy)
+        sol = solve(Problem(m, spec))  # default tolerance 1e-8, certified
+        ref = ref_reach(
+            m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=strategy == "maximize"
+        )
+        assert sol.converged and np.all(sol.upper - sol.lower < 1e-8)
+        # the reference iterates from below to a residual of 1e-14: it may sit a little
+        # under the exact value
+        assert np.all(sol.lower <= ref + 1e-10) and np.all(ref <= sol.upper + 1e-12)
+        assert sol.values == pytest.approx(ref, abs=1e-8)
+
+
+def test_certified_upper_bound_in_an_adversary_trap():
+    # state 0: [0, 1] to itself and to the goal: the adversary keeps the run at 0 forever;
+    # the greatest fixed point (1) is not the value (0); the bracket must close at 0
+    m = IMDP(2, [0, 0, 1], [0, 0, 0], [0, 1, 1], [0, 0, 1], [1, 1, 1], labels=[(), ("g",)])
+    sol = solve(Problem(m, Specification(ReachAvoid("g")), None), ValueIteration(precompute=False))
+    assert sol.converged and sol.upper[0] < 1e-8 and sol.lower[0] == 0.0
+
+
+def test_discounted_bracket_contains_reference():
+    rng = np.random.default_rng(33)
+    m = random_imdp(rng, n_states=15)
+    w = rng.normal(size=m.n_states)
+    sol = solve(Problem(m, Specification(DiscountedReward(w, 0.8))), ValueIteration(1e-9))
+    ref = ref_discounted(m, w, 0.8, pessimistic=True)
+    assert sol.converged and sol.error < 1e-9
+    assert np.all(sol.lower <= ref + 1e-12) and np.all(ref <= sol.upper + 1e-12)
+
+
+def test_chain_reach_ignores_float_dust_that_closes_a_class():
+    # states 0 <-> 1 keep all their mass between them except for a 1e-17 leak into the
+    # target 2: numerically a closed class, whose linear system is singular
+    import scipy.sparse as sp
+
+    from planner.imdp.evaluate import chain_reach
+
+    for leak_row in (0, 1):
+        m = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+        m[leak_row, 2] = 1e-17
+        out = chain_reach(sp.csr_matrix(m), np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+        assert np.isfinite(out).all() and out[0] == out[1] == 0.0
+    # a real leak is kept
+    m = sp.csr_matrix(np.array([[0.0, 0.5, 0.5], [1.0, 0.0, 0.0]]))
+    out = chain_reach(m, np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(out[:2], 1.0)
