@@ -29,6 +29,13 @@ def register(subparsers) -> None:
         metavar="NAME",
         help="alphabet in letter-bit order (default: the formula's propositions, sorted)",
     )
+    add_translation_limits(p)
+    p.set_defaults(func=run)
+
+
+def add_translation_limits(p: argparse.ArgumentParser) -> None:
+    """The options ``--max-states``, ``--max-letters``, ``--max-seconds`` of a command that
+    translates a formula (read back by :func:`translation_limits`)."""
     # the defaults are planner.ltl.budget.TranslationLimits' (not imported here: it needs scipy)
     p.add_argument(
         "--max-states",
@@ -37,22 +44,27 @@ def register(subparsers) -> None:
     )
     p.add_argument("--max-letters", type=at_least(2), help="most letters 2^|AP| [65536]")
     p.add_argument("--max-seconds", type=positive_float, help="time limit of the translation [10]")
-    p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from planner.errors import PlannerError
+def translation_limits(args: argparse.Namespace):
+    """The :class:`planner.ltl.budget.TranslationLimits` of the options, defaults elsewhere."""
     from planner.ltl.budget import TranslationLimits
-    from planner.ltl.dot import to_dot
-    from planner.ltl.hoa import to_hoa
-    from planner.ltl.translate import translate
 
     given = {
         "max_letters": args.max_letters,
         "max_states": args.max_states,
         "max_seconds": args.max_seconds,
     }
-    limits = TranslationLimits(**{k: v for k, v in given.items() if v is not None})
+    return TranslationLimits(**{k: v for k, v in given.items() if v is not None})
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.ltl.dot import to_dot
+    from planner.ltl.hoa import to_hoa
+    from planner.ltl.translate import translate
+
+    limits = translation_limits(args)
     try:
         t0 = time.perf_counter()
         aut = translate(args.formula, args.ap, limits)

@@ -1096,12 +1096,70 @@ def zip_of_text() -> bytes:
     return buf.getvalue()
 
 
+def ring_model(n: int, n_labels: int) -> tuple[str, str]:
+    """A PRISM ring of ``n`` states (to itself or the next, each [0.4, 0.6]) and labels
+    ``p1..p{n_labels}`` spread over it: ``(tra, lab)``."""
+    tra = [f"{n} {n} {2 * n}\n"]
+    tra += [f"{s} 0 {s} [0.4,0.6]\n{s} 0 {(s + 1) % n} [0.4,0.6]\n" for s in range(n)]
+    names = " ".join(f'{k}="p{k}"' for k in range(1, n_labels + 1))
+    lab = [f'0="init" {names}\n0: 0\n'] + [f"{s}: {1 + s % n_labels}\n" for s in range(1, n)]
+    return "".join(tra), "".join(lab)
+
+
+def imdp_check_cases() -> list[Case]:
+    """``hopnav imdp check`` (an LTL formula over a model file's labels): the formula's
+    hostile forms, a translation or a product beyond the limits, broken files."""
+    files = {"m.tra": TRA, "m.lab": LAB}
+    cases = [
+        Case(f"imdp-check-{name}", ("imdp", "check", "m.tra", "--ltl", formula), files, says=says)
+        for name, formula, says in (
+            ("unknown-label", "F nowhere", ("nowhere",)),
+            ("syntax", "F (goal", ()),
+            ("empty", "", ()),
+            ("nested-1000", "(" * 1000 + "goal" + ")" * 1000, ("nest",)),
+            ("not-5000", "!" * 5000 + "goal", ("nest",)),
+            ("tokens-30000", " & ".join(["goal"] * 15000), ("tokens",)),
+            ("binary", "F \x00\x01", ()),
+        )
+    ]
+    tra, lab = ring_model(20_000, 8)
+    eight = " & ".join(f"F p{k}" for k in range(1, 9))  # 256 automaton states
+    cases += [
+        Case(
+            "imdp-check-product-too-large",
+            ("imdp", "check", "r.tra", "--ltl", eight),
+            {"r.tra": tra, "r.lab": lab},
+            says=("product", "5120000 states", "limit"),
+        ),
+        Case(
+            "imdp-check-max-states",
+            ("imdp", "check", "r.tra", "--ltl", eight, "--max-states", "100"),
+            {"r.tra": tra, "r.lab": lab},
+            says=("states",),
+        ),
+        Case(
+            "imdp-check-max-seconds",
+            ("imdp", "check", "m.tra", "--ltl", "F goal", "--max-seconds", "0"),
+            files,
+        ),
+        Case(
+            "imdp-check-binary-file",
+            ("imdp", "check", "m.tra", "--ltl", "F goal"),
+            {"m.tra": b"\xff\xfe\x00binary", "m.lab": LAB},
+        ),
+        Case("imdp-check-missing-file", ("imdp", "check", "none.tra", "--ltl", "F goal")),
+        Case("imdp-check-no-ltl", ("imdp", "check", "m.tra"), files),
+    ]
+    return cases
+
+
 def all_cases() -> list[Case]:
     cases = [
         *issue_tracebacks(),
         *issue_hangs(),
         *issue_wrong_successes(),
         *issue_other_classes(),
+        *imdp_check_cases(),
         *generated(),
     ]
     names = [c.name for c in cases]

@@ -162,12 +162,24 @@ def test_sweep_interrupted_at_random_moments_resumes_to_the_same_table(tmp_path,
 @pytest.mark.parametrize("kind", [signal.SIGTERM, signal.SIGINT])
 def test_run_interrupted_mid_run_removes_its_temporary_files(tmp_path, kind):
     """``hopnav run`` stopped by SIGTERM (or SIGINT) while a recording is being written: one
-    line, exit code 1, no temporary file or folder left beside the outputs."""
+    line, exit code 1, no temporary file or folder left beside the outputs (100 runs of up
+    to 400 hops: the signal comes while one is in progress, however fast a run reaches the
+    goal)."""
     tiny = tmp_path / "tiny.toml"
     tiny.write_text(scenario().replace("max_steps = 12", "max_steps = 400"))
     path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hopnav", "run", "--scenario", str(tiny), "--quiet"],
+        [
+            sys.executable,
+            "-m",
+            "hopnav",
+            "run",
+            "--scenario",
+            str(tiny),
+            "--runs",
+            "100",
+            "--quiet",
+        ],
         cwd=tmp_path,
         env={**os.environ, "PYTHONPATH": path},
         stdin=subprocess.DEVNULL,
