@@ -94,8 +94,11 @@ DEFAULT_FORMULA = "!Haz U Goal"
 #: Limits of a scenario, checked before anything of that size is built: cells of the grid,
 #: labelled regions, rectangles and cells listed per region, the magnitude of a cell's
 #: reward, propositions of the formula (the letters 2^n of its automaton), nesting depth
-#: of the TOML and the size of the file.
-MAX_CELLS = 1 << 16
+#: of the TOML and the size of the file. The transition intervals of a synthesis are dense
+#: (rows x cells, :func:`planner.intervals.transition_intervals`), so memory grows with the
+#: square of the cells: ``imdp export --scenario`` of 45 x 45 cells took 1.2 GB, of 64 x 64
+#: 3.6 GB, of 256 x 256 it asked for 254 GiB.
+MAX_CELLS = 1 << 11
 MAX_REGIONS = 64
 MAX_REGION_ITEMS = 4096
 MAX_REWARD = 1.0e6

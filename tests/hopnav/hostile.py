@@ -1108,7 +1108,8 @@ def ring_model(n: int, n_labels: int) -> tuple[str, str]:
 
 def imdp_check_cases() -> list[Case]:
     """``hopnav imdp check`` (an LTL formula over a model file's labels): the formula's
-    hostile forms, a translation or a product beyond the limits, broken files."""
+    hostile forms, a translation or a product beyond the limits, broken files; a world
+    beyond the cell limit for ``imdp export --scenario``."""
     files = {"m.tra": TRA, "m.lab": LAB}
     cases = [
         Case(f"imdp-check-{name}", ("imdp", "check", "m.tra", "--ltl", formula), files, says=says)
@@ -1149,6 +1150,15 @@ def imdp_check_cases() -> list[Case]:
         ),
         Case("imdp-check-missing-file", ("imdp", "check", "none.tra", "--ltl", "F goal")),
         Case("imdp-check-no-ltl", ("imdp", "check", "m.tra"), files),
+    ]
+    cases += [
+        Case("run-tour-unknown", ("run", "--tour", "nowhere")),
+        Case(
+            "imdp-export-world-256",
+            ("imdp", "export", "--scenario", "w.toml", "--out", "p.drn"),
+            {"w.toml": scenario(width=256, height=256)},
+            says=("cells, more than the limit of 2048",),
+        ),
     ]
     return cases
 
