@@ -162,7 +162,8 @@ def test_sweep_interrupted_at_random_moments_resumes_to_the_same_table(tmp_path,
 @pytest.mark.parametrize("kind", [signal.SIGTERM, signal.SIGINT])
 def test_run_interrupted_mid_run_removes_its_temporary_files(tmp_path, kind):
     """``hopnav run`` stopped by SIGTERM (or SIGINT) while a recording is being written: one
-    line, exit code 1, no temporary file or folder left beside the outputs (100 runs of up
+    line, exit code 1, no temporary file or folder left beside the outputs, and the
+    recording, when a run had finished, readable with every finished run (100 runs of up
     to 400 hops: the signal comes while one is in progress, however fast a run reaches the
     goal)."""
     tiny = tmp_path / "tiny.toml"
@@ -201,3 +202,12 @@ def test_run_interrupted_mid_run_removes_its_temporary_files(tmp_path, kind):
     assert proc.returncode == 1 and len(lines) == 1 and "interrupted" in lines[0], err
     assert "Traceback" not in err
     assert _temporaries(runs) == [], _temporaries(runs)
+    kept = int(lines[0].split("kept the ")[1].split()[0])
+    rrd = runs / "tiny.rrd"
+    if kept == 0:
+        assert not rrd.exists()
+    else:  # the recording is readable and holds every finished run
+        from hopper_sim.recording import summarize_recording
+
+        ended = [r for r in summarize_recording(rrd)["runs"] if r["outcome"] is not None]
+        assert len(ended) == kept, (kept, ended)
