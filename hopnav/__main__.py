@@ -2,7 +2,11 @@
 
 import sys
 
-from hopnav.cli import main
+try:
+    from hopnav.cli import entry
+except KeyboardInterrupt:  # Ctrl-C while Python was still starting
+    sys.stderr.write("hopnav: interrupted\n")
+    sys.exit(1)
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

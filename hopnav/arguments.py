@@ -56,6 +56,23 @@ def at_least(minimum: int, why: str = "") -> Callable[[str], int]:
     return parse
 
 
+def int_range(minimum: int, maximum: int, what: str = "") -> Callable[[str], int]:
+    """A whole number in ``[minimum, maximum]`` (an upper bound on an input-sized
+    resource); ``what`` names the resource in the message."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        reason = f" ({what})" if what else ""
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}{reason}, got {value}")
+        if value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}{reason}, got {value}")
+        return value
+
+    parse.__name__ = f"int_range_{minimum}_{maximum}"
+    return parse
+
+
 def positive_float(text: str) -> float:
     """A finite number > 0."""
     try:

@@ -8,7 +8,8 @@ code. Only the module of the command on the command line is imported (``hopnav -
 command is one module plus one line here.
 
 Errors follow :mod:`hopnav.errors`: one line on stderr, exit code 2 for bad input, 1 for a
-failed or interrupted run.
+failed or interrupted run. SIGTERM is handled as Ctrl-C (SIGINT): the command stops, keeps
+what it finished, removes its temporary files and says so in one line.
 """
 
 from __future__ import annotations
@@ -16,8 +17,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, NoReturn
 
 from hopnav import __version__
@@ -135,18 +139,52 @@ def run_command(args: argparse.Namespace) -> int:
         return EXIT_FAILED
 
 
+def _terminated(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt inside the block (main thread only), so that the
+    interrupt handling of the commands (keep finished results, remove temporary files)
+    applies to it too; the previous handler is restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default: ``sys.argv[1:]``), run the command, return its exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
+    with _sigterm_as_interrupt():
+        try:
+            parser = build_parser(command if command in COMMANDS else None)
+            args = parser.parse_args(argv)
+        except KeyboardInterrupt:
+            _say(f"hopnav {command}" if command in COMMANDS else "hopnav", "interrupted")
+            return EXIT_FAILED
+        return run_command(args)
+
+
+def entry() -> int:
+    """The console script: :func:`main`, then Ctrl-C is ignored while Python shuts down (the
+    command has finished and said so; unloading torch takes a second, and an interrupt then
+    would end the process without a word)."""
     try:
-        parser = build_parser(command if command in COMMANDS else None)
-        args = parser.parse_args(argv)
-    except KeyboardInterrupt:
-        _say(f"hopnav {command}" if command in COMMANDS else "hopnav", "interrupted")
-        return EXIT_FAILED
-    return run_command(args)
+        code = main()
+    except KeyboardInterrupt:  # between the command's end and the line below
+        _say("hopnav", "interrupted")
+        code = EXIT_FAILED
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

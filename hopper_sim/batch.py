@@ -28,7 +28,9 @@ from hopper_sim.hop import (
     STATUS_CODES,
     STATUS_NAMES,
     HopInputError,
+    implausible,
     validate_inputs,
+    validate_range,
 )
 from hopper_sim.model import HopperModel
 from hopper_sim.terrain import ForceField
@@ -38,6 +40,7 @@ _NO_TOUCHDOWN = STATUS_CODES["no_touchdown"]
 _NO_LIFTOFF = STATUS_CODES["no_liftoff"]
 _GROUND = STATUS_CODES["ground"]
 _UNSTABLE = STATUS_CODES["unstable"]
+_NON_PHYSICAL = STATUS_CODES["non_physical"]
 
 #: Hops stepped together in one MjData (copies of the hopper in one model, see
 #: :meth:`HopperModel.replicated`): about 3.5x less CPU per hop-step than one per MjData.
@@ -237,6 +240,7 @@ def simulate_hops(
     """
     vel, alpha, beta, pos, noise = _as_batch_inputs(vel, alpha, beta, pos, noise)
     p = model.params
+    validate_range(p, pos, vel, beta, noise, what="simulate_hops")
     n = vel.shape[0]
     td = slip.touchdown(p, pos, vel, alpha, beta)
     force = np.zeros((n, 2)) if terrain is None else terrain.force(td.foot[:, :2])
@@ -307,6 +311,13 @@ def _finish(
         next_pos[good] = fl.next_pos[~low]
         next_vel[good] = fl.next_vel[~low]
     energy_after = np.where(status == _OK, model.energy(p.rest_length, next_vel), np.nan)
+    passive = (c == 0.0) & ~np.any(force != 0.0, axis=1)
+    if noise is not None:
+        passive &= ~np.any(noise != 0.0, axis=1)
+    ok = status == _OK
+    wrong = ok & implausible(td.time, liftoff_time, flight_time, e_before, energy_after, passive)
+    status[wrong] = _NON_PHYSICAL
+    energy_after[wrong] = np.nan
     return BatchHopResult(
         ok=status == _OK,
         status=status,

@@ -28,7 +28,14 @@ from hopper_sim.model import HopperModel
 from hopper_sim.terrain import ForceField
 
 #: Status names; index = the integer code used by the batched path.
-STATUS_NAMES: tuple[str, ...] = ("ok", "no_touchdown", "no_liftoff", "ground", "unstable")
+STATUS_NAMES: tuple[str, ...] = (
+    "ok",
+    "no_touchdown",
+    "no_liftoff",
+    "ground",
+    "unstable",
+    "non_physical",
+)
 STATUS_CODES: dict[str, int] = {name: i for i, name in enumerate(STATUS_NAMES)}
 
 #: Longest stance [s] before a hop fails with ``no_liftoff`` (a linear-spring stance of the
@@ -36,6 +43,18 @@ STATUS_CODES: dict[str, int] = {name: i for i, name in enumerate(STATUS_NAMES)}
 MAX_STANCE_TIME = 2.0
 #: Samples of each ballistic phase in ``HopResult.com_path``.
 PATH_SAMPLES = 16
+#: Fewest integration steps in which the leg may sweep its rest length: it bounds the speeds
+#: a hop accepts, ``|v_xy|, |v_z| <= l0 / (MIN_SWEEP_STEPS * dt)`` (50 m/s for the shipped
+#: model, six times the controller's training box; beyond it a stance spans a few steps).
+MIN_SWEEP_STEPS = 20
+#: Largest landing noise |nu_x|, |nu_y| a hop accepts, in leg rest lengths (the model's
+#: noise is truncated at 0.2 l0).
+MAX_NOISE_LEGS = 1.0
+#: Largest |x|, |y| of a hop's start [m].
+MAX_POSITION = 1.0e6
+#: Relative energy change allowed in a passive hop (no thrust, terrain force or noise): the
+#: spring-mass stance conserves energy (RK4 drifts by about 1e-9).
+PASSIVE_ENERGY_TOLERANCE = 1.0e-4
 
 
 class HopFailure(Exception):
@@ -45,7 +64,9 @@ class HopFailure(Exception):
       liftoff peaks below l0 so there is no next interstitial state (no next touchdown);
     * ``no_liftoff``: the leg did not return to l0 within :data:`MAX_STANCE_TIME`;
     * ``ground``: the CoM reached the ground (z <= 0) in stance;
-    * ``unstable``: the integration produced a non-finite state or a MuJoCo warning.
+    * ``unstable``: the integration produced a non-finite state or a MuJoCo warning;
+    * ``non_physical``: the result is not physical (times out of order or negative, or a
+      passive hop whose energy changed; :func:`implausible`).
     """
 
     def __init__(self, reason: str, message: str) -> None:
@@ -160,6 +181,62 @@ def validate_inputs(
         raise HopInputError(
             f"{what}: the interstitial state descends (vz <= 0), row {row}: vz = {vel[row, 2]}"
         )
+
+
+def max_speed(params) -> float:
+    """The largest horizontal and vertical speed [m/s] a hop accepts (:data:`MIN_SWEEP_STEPS`)."""
+    return params.rest_length / (MIN_SWEEP_STEPS * params.timestep)
+
+
+def validate_range(
+    params, pos: np.ndarray, vel: np.ndarray, beta: np.ndarray, noise, what: str = "hop"
+) -> None:
+    """Raise :class:`HopInputError` for inputs outside the model's valid range: speeds
+    beyond :func:`max_speed`, an azimuth outside [-pi, pi], noise beyond
+    :data:`MAX_NOISE_LEGS` leg lengths, a start beyond :data:`MAX_POSITION`."""
+    v_max = max_speed(params)
+    checks = [
+        ("|pos|", np.abs(pos).max(axis=1), MAX_POSITION, "m"),
+        ("the horizontal speed", np.hypot(vel[:, 0], vel[:, 1]), v_max, "m/s"),
+        ("|vz|", np.abs(vel[:, 2]), v_max, "m/s"),
+        ("|beta|", np.abs(beta), np.pi, "rad"),
+    ]
+    if noise is not None:
+        checks.append(
+            ("|noise|", np.abs(noise).max(axis=1), MAX_NOISE_LEGS * params.rest_length, "m")
+        )
+    for name, value, limit, unit in checks:
+        bad = ~(value <= limit)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise HopInputError(
+                f"{what}: {name} = {value[row]:.6g} {unit} at row {row} is outside the model's "
+                f"valid range (at most {limit:.6g} {unit})"
+            )
+
+
+def implausible(
+    touchdown_time: np.ndarray,
+    liftoff_time: np.ndarray,
+    flight_time: np.ndarray,
+    energy_before: np.ndarray,
+    energy_after: np.ndarray,
+    passive: np.ndarray,
+) -> np.ndarray:
+    """Mask of hop results that are not physical: a time that is not finite, negative or out
+    of order (touchdown <= liftoff, flight > 0), a non-finite energy, or a passive hop whose
+    energy changed by more than :data:`PASSIVE_ENERGY_TOLERANCE`."""
+    times_ok = (
+        np.isfinite(touchdown_time)
+        & np.isfinite(liftoff_time)
+        & np.isfinite(flight_time)
+        & (touchdown_time >= 0.0)
+        & (liftoff_time >= touchdown_time)
+        & (flight_time > 0.0)
+    )
+    energy_ok = np.isfinite(energy_after)
+    drift = np.abs(energy_after - energy_before) > PASSIVE_ENERGY_TOLERANCE * np.abs(energy_before)
+    return ~times_ok | ~energy_ok | (passive & drift)
 
 
 def _as_hop_inputs(pos, vel, alpha, beta, noise):
@@ -311,6 +388,19 @@ def _hop_with_command(
     result.next_pos = fl.next_pos[0]
     result.next_vel = fl.next_vel[0]
     result.energy_after = float(hm.energy(p.rest_length, fl.next_vel[0]))
+    passive = c == 0.0 and not np.any(result.terrain_force) and not np.any(nu)
+    if implausible(
+        *(np.array([x]) for x in (td.time[0], t_lo, result.flight_time, e_before)),
+        np.array([result.energy_after]),
+        np.array([passive]),
+    )[0]:
+        result.ok, result.status = False, "non_physical"
+        result.message = (
+            f"not a physical hop: touchdown at {td.time[0]:.6g} s, liftoff at {t_lo:.6g} s, "
+            f"flight {result.flight_time:.6g} s, energy {e_before:.6g} -> "
+            f"{result.energy_after:.6g} J"
+        )
+        return result
     if record:
         t_stance = td.time[0] + p.timestep * np.arange(len(st.path))
         ts = np.linspace(0.0, fl.duration[0], PATH_SAMPLES)
@@ -358,6 +448,7 @@ def simulate_hop(
     """
     pos, vel, alpha_a, beta_a, nu = _as_hop_inputs(pos, vel, alpha, beta, noise)
     p = model.params
+    validate_range(p, pos, vel, beta_a, nu)
     data = data if data is not None else model.make_data()
     td = slip.touchdown(p, pos, vel, alpha_a, beta_a)
     force = np.zeros(2) if terrain is None else terrain.force(td.foot[:, :2])[0]

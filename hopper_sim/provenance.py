@@ -164,8 +164,8 @@ def require_same_scenario(
         ProvenanceError: ``found`` has no ``scenario_sha256``, or another one; the message
             names ``what`` (e.g. the file) and both scenarios.
     """
-    digest = None if found is None else found.get("scenario_sha256")
-    if not digest:
+    digest = found.get("scenario_sha256") if isinstance(found, Mapping) else None
+    if not digest or not isinstance(digest, str):
         raise ProvenanceError(
             f"{what} carries no scenario digest (written by an older hopnav?), so it cannot "
             f"be matched to scenario {expected.get('scenario')!r}; use another file"

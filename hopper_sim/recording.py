@@ -1,8 +1,9 @@
 """rerun recordings of navigation runs, with a blueprint, and readers that summarise them.
 
 :class:`RerunRecorder` is an :class:`~hopper_sim.events.Observer` that writes one rerun
-recording (``.rrd``, rerun-sdk 0.41, headless file sink) per invocation. It writes to a
-temporary file beside the target and moves it into place on :meth:`RerunRecorder.close`, so
+recording (``.rrd``, rerun-sdk 0.41, headless file sink) per invocation. It writes into a
+private temporary folder beside the target (:func:`planner.atomic.new_temporary_folder`: no
+planted link is followed) and moves the file into place on :meth:`RerunRecorder.close`, so
 a crashed invocation never leaves a half-written recording. Hops are buffered per run and
 written with ``send_columns`` (one call per entity for up to ``flush_every`` hops), at each
 synthesis, at the run's end and on close. Every hop adds a bounded amount of data (its CoM
@@ -99,11 +100,12 @@ above the GP maps; the time panel opens on ``sim_time``.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import math
 import os
+import shutil
+import weakref
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -126,6 +128,7 @@ from hopper_sim.styles import (
     region_components,
     region_letters,
 )
+from planner.atomic import new_temporary_folder
 
 if TYPE_CHECKING:
     from hopper_sim.events import ResynthesisRecord
@@ -249,7 +252,12 @@ class RerunRecorder(Observer):
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise RecordingError(f"cannot write {self.path}: folder {self.path.parent} missing")
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        # rerun opens the sink by name: a private folder beside the target holds it, so no
+        # planted file or link can be written through (planner.atomic)
+        self._tmp_folder = new_temporary_folder(self.path)
+        self._tmp = self._tmp_folder / self.path.name
+        # removed on close/discard, else when the recorder is collected or Python exits
+        self._remove_tmp = weakref.finalize(self, shutil.rmtree, self._tmp_folder, True)
         self._rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self._rec.set_log_time_enabled(False)
         self._rec.set_log_tick_enabled(False)
@@ -293,7 +301,10 @@ class RerunRecorder(Observer):
         self._closed = True
         self._rec.flush()
         self._rec.disconnect()
-        os.replace(self._tmp, self.path)
+        try:
+            os.replace(self._tmp, self.path)
+        finally:
+            self._remove_tmp()
 
     def discard(self) -> None:
         """Stop recording and delete the temporary file; nothing appears at :attr:`path`."""
@@ -301,8 +312,7 @@ class RerunRecorder(Observer):
             return
         self._closed = True
         self._rec.disconnect()
-        with contextlib.suppress(FileNotFoundError):
-            self._tmp.unlink()
+        self._remove_tmp()
 
     def _time(self, hop: int, sim_time: float) -> None:
         self._rec.set_time("hop", sequence=int(hop))

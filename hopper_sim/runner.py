@@ -65,6 +65,7 @@ from hopper_sim.events import (
 )
 from planner.gp.landing import FitSettings, LandingErrorGP
 from planner.imdp.grid import ACTIONS
+from planner.imdp.product import check_product_size
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import Resynthesis, ResynthesisSettings, replan_reward, resynthesise
 from planner.ltl.translate import translate
@@ -163,6 +164,8 @@ class NavigationRunner:
         )
         nq = self.automaton.n_states
         n_product = self.grid.n_states * nq
+        # before any hop: each enabled (cell, action) has a successor in every product
+        check_product_size(self.grid.n_states, int(np.count_nonzero(self.grid.enabled)), nq)
         if scenario.reward_known:
             self.learner = None
         elif learner is not None:

@@ -36,11 +36,13 @@ def heading(vel: np.ndarray) -> np.ndarray:
 def time_to_height(z0: np.ndarray, vz: np.ndarray, h: np.ndarray, g: float) -> np.ndarray:
     """Time [s] for a ballistic CoM at height z0 with vertical speed vz to reach height h
     while descending: the larger root of z0 + vz t - g t^2 / 2 = h; NaN where the apex
-    z0 + vz^2 / (2 g) is below h."""
+    z0 + vz^2 / (2 g) is below h, or where both roots lie in the past (below h and already
+    falling: it never comes back up to h)."""
     disc = np.asarray(vz) ** 2 + 2.0 * g * (np.asarray(z0) - np.asarray(h))
     with np.errstate(invalid="ignore"):
         root = np.sqrt(np.where(disc >= 0.0, disc, np.nan))
-    return (vz + root) / g
+        t = (vz + root) / g
+        return np.where(t >= 0.0, t, np.nan)
 
 
 def ballistic(

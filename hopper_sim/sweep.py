@@ -73,6 +73,10 @@ PAPER_TABLE_I: dict[tuple[float, float], tuple[float, float]] = {
 """The paper's Table I: ``(C, eps) -> (mean reward, mean steps)`` over ten runs of case (a)."""
 
 
+#: Most runs of one sweep (the seeds of all of them are drawn up front).
+MAX_RUNS = 100_000
+
+
 class SweepError(ValueError):
     """A sweep was set up with bad parameters."""
 
@@ -129,6 +133,12 @@ class SweepSpec:
             raise SweepError(f"runs must be a whole number >= 1, got {self.runs}")
         if int(self.seed) != self.seed or self.seed < 0:
             raise SweepError(f"seed must be a whole number >= 0, got {self.seed}")
+        n_runs = len(cs) * len(epss) * int(self.runs)
+        if n_runs > MAX_RUNS:
+            raise SweepError(
+                f"{len(cs)} x {len(epss)} cells x {int(self.runs)} runs = {n_runs} runs, more "
+                f"than the limit of {MAX_RUNS}"
+            )
         object.__setattr__(self, "cs", cs)
         object.__setattr__(self, "epss", epss)
         object.__setattr__(self, "runs", int(self.runs))
@@ -470,14 +480,33 @@ def _run_task(run: RunFunction, scenario: Scenario, task: SweepTask) -> SweepRow
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
-def _init_worker() -> None:
+def die_with_parent(parent: int) -> None:
+    """Make this process end when its parent (pid ``parent``) ends, also by SIGKILL: the
+    kernel sends it SIGKILL then (Linux ``PR_SET_PDEATHSIG``; elsewhere a no-op). Exits at
+    once if the parent has already gone."""
+    import sys
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig, sigkill = 1, 9
+        libc.prctl(pr_set_pdeathsig, sigkill, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+def _init_worker(parent: int | None = None) -> None:
     # Workers share the cores: one compute thread each (torch reads these when imported).
     for var in _THREAD_VARS:
         os.environ[var] = "1"
     import signal
     import sys
 
+    if parent is not None:
+        die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
     torch = sys.modules.get("torch")
     if torch is not None:
@@ -508,24 +537,46 @@ def _iter_process(
     run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask], workers: int
 ) -> Iterator[tuple[SweepTask, SweepRow]]:
     import multiprocessing
+    import signal
+    import threading
 
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker) as pool:
-        pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
+    pool: ProcessPoolExecutor | None = None
+    pending: dict = {}
+    # The workers (and multiprocessing's resource tracker) are started with SIGINT ignored,
+    # which they keep from their first instruction: a Ctrl-C reaches the whole process
+    # group, and is the parent's alone to handle (no worker prints a traceback).
+    main = threading.current_thread() is threading.main_thread()
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
         try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    task = pending.pop(fut)
-                    yield task, fut.result()
-        except KeyboardInterrupt:
-            # stop the runs in progress now instead of waiting for them at shutdown
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                proc.terminate()
-            raise
+            pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=ctx,
+                initializer=_init_worker,
+                initargs=(os.getpid(),),
+            )
+            pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
         finally:
-            for fut in pending:
-                fut.cancel()
+            if main:
+                signal.signal(signal.SIGINT, previous)
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                task = pending.pop(fut)
+                yield task, fut.result()
+    except BaseException:
+        # interrupted (Ctrl-C, SIGTERM), a run failed or the consumer stopped: end the runs
+        # in progress now instead of waiting for them (a SIGKILL of this process ends the
+        # workers through die_with_parent)
+        for fut in pending:
+            fut.cancel()
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        raise
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _import_ray() -> Any:

@@ -28,10 +28,15 @@ from hopper_sim.sweep import (
     summary_record,
 )
 from planner.atomic import atomic_write
+from planner.textfile import read_text
 
 ROWS_FILE = "sweep_runs.csv"
 SUMMARY_FILE = "sweep_summary.csv"
 MARKDOWN_FILE = "table_i.md"
+
+
+#: Largest sweep CSV read [bytes].
+MAX_CSV_BYTES = 1 << 28
 
 
 class SweepFileError(ValueError):
@@ -240,15 +245,21 @@ def read_rows_csv(path: str | Path) -> list[SweepRow]:
         SweepFileError: missing file, missing column or a bad value (names line and column).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        raise SweepFileError(f"{path}: cannot read: {err}") from err
+    text = read_text(path, SweepFileError, MAX_CSV_BYTES)
     reader = csv.DictReader(io.StringIO(text))
-    header = reader.fieldnames or []
-    missing = [c for c in ROW_COLUMNS if c not in header and c not in _OPTIONAL]
-    if missing:
-        raise SweepFileError(f"{path}:1: missing column(s) {missing} (need {list(ROW_COLUMNS)})")
+    try:
+        header = reader.fieldnames or []
+        missing = [c for c in ROW_COLUMNS if c not in header and c not in _OPTIONAL]
+        if missing:
+            raise SweepFileError(
+                f"{path}:1: missing column(s) {missing} (need {list(ROW_COLUMNS)})"
+            )
+        return _read_records(path, reader, header)
+    except csv.Error as err:
+        raise SweepFileError(f"{path}:{reader.line_num}: malformed CSV ({err})") from None
+
+
+def _read_records(path: Path, reader: csv.DictReader, header: list[str]) -> list[SweepRow]:
     rows = []
     for record in reader:
         line = reader.line_num
@@ -263,5 +274,8 @@ def read_rows_csv(path: str | Path) -> list[SweepRow]:
                 values[name] = _parse_field(name, raw.strip())
             except ValueError as err:
                 raise SweepFileError(f"{path}:{line}: column '{name}': {err}") from err
-        rows.append(SweepRow(**values))
+        try:
+            rows.append(SweepRow(**values))
+        except (TypeError, ValueError) as err:
+            raise SweepFileError(f"{path}:{line}: {err}") from None
     return rows

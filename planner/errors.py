@@ -15,6 +15,16 @@ class AutomatonError(PlannerError):
     """An automaton is malformed (bad transition table, unknown state, bad alphabet)."""
 
 
+class TranslationLimitError(AutomatonError):
+    """An LTL translation exceeded a limit (letters, states or time;
+    :class:`planner.ltl.budget.TranslationLimits`)."""
+
+
+class ResourceLimitError(PlannerError):
+    """An input asks for more than a bounded resource allows (states, actions, cells, ...);
+    the message names the quantity, the value and the limit."""
+
+
 class UnknownPropositionError(PlannerError):
     """A formula or word names a proposition that the labels do not provide."""
 

@@ -36,9 +36,9 @@ back to a cell it has emptied; what it gives up is the tour optimisation over su
 
 from __future__ import annotations
 
+import io
 import json
 import os
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,9 +48,14 @@ import numpy as np
 from planner.atomic import atomic_write
 from planner.errors import QTableError
 from planner.imdp import IMDP, OrderingAdversary
+from planner.sealed import SealError, read_limited, seal, unseal
 
 FORMAT_TAG = "hopnav-robust-q"
 FORMAT_VERSION = 1
+#: The kind named in the header of the sealed file (:mod:`planner.sealed`).
+SEAL_KIND = "robust-q-table"
+#: Largest Q-table file read [bytes].
+MAX_FILE_BYTES = 1 << 30
 
 
 def _allowed_rows(model: IMDP, allowed: np.ndarray | None) -> np.ndarray:
@@ -426,20 +431,34 @@ class RobustQLearner:
             "settings": np.array([s.discount, s.learning_rate, s.epsilon, s.prior_reward]),
             "metadata_json": np.array(json.dumps(meta)),
         }
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
         with atomic_write(path, fsync=True) as f:
-            np.savez(f, **arrays)
+            f.write(seal(SEAL_KIND, buf.getvalue()))
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> RobustQLearner:
         """Read a file written by :meth:`save`; raises :class:`QTableError` naming the file and
-        the field when it is unreadable or inconsistent."""
+        the field when it is unreadable, altered (the digest of the sealed file,
+        :mod:`planner.sealed`, does not match) or inconsistent."""
         path = Path(path)
         try:
-            with np.load(path, allow_pickle=False) as data:
-                arrays = {k: data[k] for k in data.files}
+            data = read_limited(path, MAX_FILE_BYTES)
         except FileNotFoundError:
             raise
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        except (OSError, SealError) as exc:
+            raise QTableError(f"{path}: not a readable Q-table file ({exc})") from exc
+        if data.startswith(b"PK\x03\x04"):
+            raise QTableError(
+                f"{path}: a Q-table written without a digest of its contents (an older "
+                "hopnav); it cannot be checked, learn it again"
+            )
+        try:
+            with np.load(io.BytesIO(unseal(data, SEAL_KIND)), allow_pickle=False) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except SealError as exc:
+            raise QTableError(f"{path}: not a readable Q-table file: {exc}") from None
+        except Exception as exc:  # zipfile and numpy raise many types for a damaged payload
             raise QTableError(f"{path}: not a readable Q-table file ({exc})") from exc
         need = ("format", "version", "q", "reward_sum", "reward_count", "state_cell", "settings")
         missing = [k for k in need if k not in arrays]

@@ -78,7 +78,8 @@ from planner.errors import (
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
-from planner.toml_lines import key_lines, line_of
+from planner.textfile import read_text
+from planner.toml_lines import key_lines, line_of, nesting_depth
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -89,6 +90,21 @@ SHIPPED_SCENARIOS: tuple[str, ...] = ("a", "b", "c", "d")
 """Names of the case studies shipped as package data (``planner/scenarios/<name>.toml``)."""
 
 DEFAULT_FORMULA = "!Haz U Goal"
+
+#: Limits of a scenario, checked before anything of that size is built: cells of the grid,
+#: labelled regions, rectangles and cells listed per region, the magnitude of a cell's
+#: reward, propositions of the formula (the letters 2^n of its automaton), nesting depth
+#: of the TOML and the size of the file. The transition intervals of a synthesis are dense
+#: (rows x cells, :func:`planner.intervals.transition_intervals`), so memory grows with the
+#: square of the cells: ``imdp export --scenario`` of 45 x 45 cells took 1.2 GB, of 64 x 64
+#: 3.6 GB, of 256 x 256 it asked for 254 GiB.
+MAX_CELLS = 1 << 11
+MAX_REGIONS = 64
+MAX_REGION_ITEMS = 4096
+MAX_REWARD = 1.0e6
+MAX_PROPOSITIONS = 16
+MAX_TOML_DEPTH = 32
+MAX_FILE_BYTES = 1 << 20
 
 COLLECT_MODES: tuple[str, ...] = ("once", "every")
 """When a cell's reward is paid: on the first landing in it during a run, or on every landing."""
@@ -130,6 +146,13 @@ class World:
                 raise ScenarioValueError(
                     f"{name} must be positive and finite, got {value}", key=key
                 )
+        cells = (self.width / self.cell) * (self.height / self.cell)
+        if not cells <= MAX_CELLS:
+            raise ScenarioValueError(
+                f"a {self.width} x {self.height} m world of {self.cell} m cells has {cells:.4g} "
+                f"cells, more than the limit of {MAX_CELLS}",
+                key="world.size",
+            )
         for name in ("width", "height"):
             n = getattr(self, name) / self.cell
             if abs(n - round(n)) > 1e-9 * max(1.0, n):
@@ -293,6 +316,11 @@ class Scenario:
         object.__setattr__(self, "regions", MappingProxyType(dict(self.regions)))
         object.__setattr__(self, "rewards", MappingProxyType(dict(self.rewards)))
         object.__setattr__(self, "start", (float(self.start[0]), float(self.start[1])))
+        if len(self.regions) > MAX_REGIONS:
+            raise ScenarioValueError(
+                f"{len(self.regions)} regions, more than the limit of {MAX_REGIONS}",
+                key="regions",
+            )
         named = [(label, f"regions.{label}") for label in self.regions]
         for label, key in [*named, (self.hazard, "hazard"), (self.goal, "goal")]:
             if not _is_proposition(label):
@@ -345,6 +373,14 @@ class Scenario:
                 raise ScenarioValueError(
                     f"reward must be finite, got {reward}", key=f"rewards.{label}"
                 )
+        big = np.flatnonzero(~(np.abs(self.reward_grid) <= MAX_REWARD).ravel())
+        if big.size:
+            i, j = divmod(int(big[0]), self.world.ny)
+            raise ScenarioValueError(
+                f"the rewards of cell ({i}, {j}) sum to {self.reward_grid[i, j]:.4g}, beyond the "
+                f"limit of +-{MAX_REWARD:g}",
+                key="rewards",
+            )
         if self.collect not in COLLECT_MODES:
             raise ScenarioValueError(
                 f"must be one of {COLLECT_MODES}, got {self.collect!r}", key="collect"
@@ -362,6 +398,12 @@ class Scenario:
 
     def _check_region(self, region: Region, key: str) -> None:
         w = self.world
+        for what, items in (("rects", region.rects), ("cells", region.cells)):
+            if len(items) > MAX_REGION_ITEMS:
+                raise ScenarioValueError(
+                    f"{len(items)} {what}, more than the limit of {MAX_REGION_ITEMS} per region",
+                    key=f"{key}.{what}",
+                )
         for k, (x0, y0, x1, y1) in enumerate(region.rects):
             if not (x0 < x1 and y0 < y1):
                 raise ScenarioValueError(
@@ -392,6 +434,12 @@ class Scenario:
             ) from err
         # A hazard or goal label that names no region and is not in the formula is a typo.
         atoms = parsed.propositions()
+        if len(atoms) > MAX_PROPOSITIONS:
+            raise ScenarioFormulaError(
+                f"the formula uses {len(atoms)} propositions, more than the limit of "
+                f"{MAX_PROPOSITIONS} (its automaton reads 2^n letters)",
+                key="formula",
+            )
         for key, label in (("hazard", self.hazard), ("goal", self.goal)):
             if label not in self.regions and label not in atoms:
                 close = difflib.get_close_matches(label, [*self.regions, *sorted(atoms)], n=1)
@@ -463,8 +511,9 @@ class Scenario:
     def reward_grid(self) -> np.ndarray:
         """Reward per cell, ``(nx, ny)`` float: the sum of the rewards of the cell's labels."""
         grid = np.zeros((self.world.nx, self.world.ny))
-        for label, reward in self.rewards.items():
-            grid += reward * self.region_mask(label)
+        with np.errstate(over="ignore"):  # a sum beyond the floats is refused by the caller
+            for label, reward in self.rewards.items():
+                grid += reward * self.region_mask(label)
         grid.flags.writeable = False
         return grid
 
@@ -667,12 +716,21 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         ScenarioSyntaxError: the text is not TOML (line from tomllib's message).
         ScenarioError: any other problem (a subclass), located at the key's line.
     """
+    depth, line = nesting_depth(text)
+    if depth > MAX_TOML_DEPTH:
+        raise ScenarioSyntaxError(
+            f"arrays or tables nested {depth} deep, more than the limit of {MAX_TOML_DEPTH}",
+            line=line,
+            source=source,
+        )
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         match = re.search(r"line (\d+)", str(err))
         line = int(match.group(1)) if match else getattr(err, "lineno", None)
         raise ScenarioSyntaxError(f"malformed TOML: {err}", line=line, source=source) from err
+    except ValueError as err:  # tomllib's int() of a number with thousands of digits
+        raise ScenarioSyntaxError(f"malformed TOML: {err}", source=source) from None
     try:
         return scenario_from_dict(data)
     except ScenarioError as err:
@@ -710,10 +768,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         ScenarioError: a subclass naming the problem, the key and the line.
     """
     path = resolve_scenario_path(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ScenarioError(f"cannot read scenario file: {err}", source=str(path)) from err
+    text = read_text(path, ScenarioError, MAX_FILE_BYTES)
     return parse_scenario(text, source=str(path))
 
 

@@ -13,9 +13,15 @@ in the parsed data can name its line. Keys are written as dotted paths with arra
 
 The scanner is meant for text that ``tomllib`` has already accepted; on text it cannot follow
 it stops and returns what it found so far (it never raises).
+
+:func:`nesting_depth` is meant for text *before* ``tomllib`` reads it: ``tomllib`` recurses
+once per nested array or inline table, so a deeply nested value would end in a
+``RecursionError``; the depth is measured without recursion first.
 """
 
 from __future__ import annotations
+
+import re
 
 _BARE = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
 
@@ -209,6 +215,30 @@ class _Scanner:
                 self.advance()
             else:
                 self.keyval(table)
+
+
+# strings and comments are skipped whole; brackets and braces outside them counted
+_NESTING = re.compile(
+    r'''"""(?:[^"\\]|\\[\s\S]|"(?!""))*"""|\'\'\'[\s\S]*?\'\'\'|"(?:[^"\\\n]|\\.)*"'''
+    r"""|'[^'\n]*'|#[^\n]*|[\[\]{}]"""
+)
+
+
+def nesting_depth(text: str) -> tuple[int, int]:
+    """``(depth, line)``: the deepest nesting of ``[``/``{`` in TOML ``text`` (strings and
+    comments skipped; a table header counts its brackets too) and the 1-based line where it
+    is first reached. Linear time, no recursion."""
+    depth = best = 0
+    best_at = 0
+    for m in _NESTING.finditer(text):
+        c = m.group()
+        if c in "[{":
+            depth += 1
+            if depth > best:
+                best, best_at = depth, m.start()
+        elif c in "]}":
+            depth = max(depth - 1, 0)
+    return best, text.count("\n", 0, best_at) + 1
 
 
 def key_lines(text: str) -> dict[str, int]:

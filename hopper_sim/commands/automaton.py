@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 
+from hopnav.arguments import at_least, positive_float, positive_int
 from hopnav.errors import UsageError
 
 
@@ -28,7 +29,33 @@ def register(subparsers) -> None:
         metavar="NAME",
         help="alphabet in letter-bit order (default: the formula's propositions, sorted)",
     )
+    add_translation_limits(p)
     p.set_defaults(func=run)
+
+
+def add_translation_limits(p: argparse.ArgumentParser) -> None:
+    """The options ``--max-states``, ``--max-letters``, ``--max-seconds`` of a command that
+    translates a formula (read back by :func:`translation_limits`)."""
+    # the defaults are planner.ltl.budget.TranslationLimits' (not imported here: it needs scipy)
+    p.add_argument(
+        "--max-states",
+        type=positive_int,
+        help="most states of any automaton built on the way [20000]",
+    )
+    p.add_argument("--max-letters", type=at_least(2), help="most letters 2^|AP| [65536]")
+    p.add_argument("--max-seconds", type=positive_float, help="time limit of the translation [10]")
+
+
+def translation_limits(args: argparse.Namespace):
+    """The :class:`planner.ltl.budget.TranslationLimits` of the options, defaults elsewhere."""
+    from planner.ltl.budget import TranslationLimits
+
+    given = {
+        "max_letters": args.max_letters,
+        "max_states": args.max_states,
+        "max_seconds": args.max_seconds,
+    }
+    return TranslationLimits(**{k: v for k, v in given.items() if v is not None})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,9 +64,10 @@ def run(args: argparse.Namespace) -> int:
     from planner.ltl.hoa import to_hoa
     from planner.ltl.translate import translate
 
+    limits = translation_limits(args)
     try:
         t0 = time.perf_counter()
-        aut = translate(args.formula, args.ap)
+        aut = translate(args.formula, args.ap, limits)
         elapsed = time.perf_counter() - t0
     except PlannerError as err:
         raise UsageError(str(err)) from None

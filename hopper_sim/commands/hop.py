@@ -13,13 +13,54 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
+from collections.abc import Iterator
 from typing import Any, TextIO
 
 from hopnav.arguments import non_negative_int
 from hopnav.errors import UsageError
 
 INVALID_INPUT = "invalid_input"
+#: Deepest nesting of arrays/objects in a JSON case (a case needs 2).
+MAX_JSON_DEPTH = 8
+#: Longest line read from stdin [bytes].
+MAX_LINE_BYTES = 1 << 16
+_JSON_TOKENS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
+
+
+def _json_depth(text: str) -> int:
+    """The deepest nesting of ``[``/``{`` in JSON ``text`` (strings skipped), without
+    recursion (``json.loads`` recurses once per level)."""
+    depth = best = 0
+    for m in _JSON_TOKENS.finditer(text):
+        c = m.group()
+        if c in "[{":
+            depth += 1
+            best = max(best, depth)
+        elif c in "]}":
+            depth -= 1
+    return best
+
+
+def _stdin_lines() -> Iterator[tuple[int, str]]:
+    """``(line number, text)`` of stdin, decoded strictly as UTF-8, lines of at most
+    :data:`MAX_LINE_BYTES`; raises :class:`HopInputError` naming the line otherwise."""
+    from hopper_sim.hop import HopInputError
+    from planner.textfile import decoded_lines
+
+    buffer = getattr(sys.stdin, "buffer", None)
+    if buffer is None:  # a text stream (tests): already decoded
+        yield from enumerate(sys.stdin, start=1)
+        return
+
+    def raw_lines() -> Iterator[bytes]:
+        while raw := buffer.readline(MAX_LINE_BYTES + 1):
+            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                raise HopInputError(f"stdin: a line longer than {MAX_LINE_BYTES} bytes")
+            yield raw
+
+    yield from decoded_lines(raw_lines(), "stdin", HopInputError)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -76,7 +117,7 @@ class _Runner:
             vel = np.asarray(case["vel"], dtype=float)
             alpha, beta = float(case["alpha"]), float(case["beta"])
             noise = None if case.get("noise") is None else np.asarray(case["noise"], dtype=float)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise HopInputError(f"non-numeric value: {exc}") from exc
         if pos.shape != (2,) or vel.shape != (3,):
             raise HopInputError(f"pos must have 2 and vel 3 numbers: {case['pos']}, {case['vel']}")
@@ -147,15 +188,27 @@ def run(args: argparse.Namespace) -> int:
     runner = _Runner()
     if args.jsonl:
         invalid: list[str] = []
-        for lineno, line in enumerate(sys.stdin, start=1):
+        lines = _stdin_lines()
+        while True:
+            try:
+                lineno, line = next(lines)
+            except StopIteration:
+                break
+            except HopInputError as exc:  # undecodable or too long: the rest is unreadable
+                result = _invalid(str(exc))
+                invalid.append(result["message"])
+                _emit(result, sys.stdout)
+                break
             if not line.strip():
                 continue
             try:
+                if _json_depth(line) > MAX_JSON_DEPTH:
+                    raise HopInputError(f"JSON nested deeper than {MAX_JSON_DEPTH} levels")
                 case = json.loads(line)
                 if not isinstance(case, dict):
                     raise HopInputError("a case must be a JSON object")
                 result = runner.hop(case)
-            except (json.JSONDecodeError, HopInputError) as exc:
+            except ValueError as exc:  # JSONDecodeError, HopInputError, too many digits
                 result = _invalid(f"line {lineno}: {exc}")
                 invalid.append(result["message"])
             _emit(result, sys.stdout)

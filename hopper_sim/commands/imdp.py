@@ -7,14 +7,17 @@ the value and its certified bracket ``lower upper`` (the maximal probability of
 bracket is narrower than the tolerance. ``--uncertified`` stops on the residual instead
 (faster, no error bound; ``upper`` is then the trivial 1).
 
-``hopnav imdp check FILE --ltl FORMULA [--format F] [--optimistic] [--tolerance T] [--json]``
+``hopnav imdp check FILE --ltl FORMULA [--format F] [--optimistic] [--tolerance T]
+[--max-states N] [--max-letters N] [--max-seconds S] [--json]``
 prints, per state, the maximal probability that a run from there satisfies the LTL
 formula (over the file's labels; worst case unless ``--optimistic``) with its certified
 bracket, through the project's automaton translation, product and exact game solution
 (:func:`planner.imdp.check.check_ltl`). JSON: ``{"initial": [...], "values": [...],
 "lower": [...], "upper": [...], "automaton_states": n}`` (``initial``: the values at the
 file's initial states). A formula that does not parse, or names a proposition that is not
-a label of the file, is a usage error (exit 2).
+a label of the file, is a usage error (exit 2), as is a translation beyond the limits
+(those of ``hopnav automaton``) or a product beyond
+:data:`planner.imdp.product.MAX_PRODUCT_STATES` / ``MAX_PRODUCT_ENTRIES``.
 
 ``hopnav imdp export FILE --out PATH [--format F] [--to F] [--target LABEL]`` writes the
 model in another format (``--target`` names bmdp-tool's terminal states).
@@ -36,6 +39,7 @@ from pathlib import Path
 
 from hopnav.arguments import input_file, output_file, positive_float
 from hopnav.errors import UsageError
+from hopper_sim.commands.automaton import add_translation_limits, translation_limits
 
 #: The model formats and the file suffix each is recognised by.
 FORMATS = ("prism", "drn", "bmdp")
@@ -68,6 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--format", choices=FORMATS, help="default: from the file suffix")
     c.add_argument("--optimistic", action="store_true", help="best case instead of worst")
     c.add_argument("--tolerance", type=positive_float, default=1e-8)
+    add_translation_limits(c)
     c.add_argument("--json", action="store_true", help="print a JSON object")
     c.set_defaults(func=run_check, prog=c.prog)
 
@@ -79,6 +84,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--format", choices=FORMATS, help="input format (default: suffix)")
     e.add_argument("--to", choices=FORMATS, help="output format (default: suffix)")
     e.add_argument("--target", action="append", help="bmdp: labels of the terminal states")
+    e.add_argument(
+        "--force",
+        action="store_true",
+        help="prism: also replace a .lab file that belongs to no .tra of that name",
+    )
     e.set_defaults(func=run_export, prog=e.prog)
 
 
@@ -160,7 +170,11 @@ def run_check(args: argparse.Namespace) -> int:
     try:
         model = read_model(args.file, fmt)
         result = check_ltl(
-            model, args.ltl, args.optimistic, ValueIteration(tolerance=args.tolerance)
+            model,
+            args.ltl,
+            args.optimistic,
+            ValueIteration(tolerance=args.tolerance),
+            limits=translation_limits(args),
         )
     except PlannerError as err:
         raise UsageError(str(err)) from None
@@ -215,7 +229,13 @@ def run_export(args: argparse.Namespace) -> int:
     to = model_format(args.out, args.to, "--to")
     output_file(args.out, "--out")
     if to == "prism":  # PRISM's explicit format is two files, the .tra and the .lab
-        output_file(Path(args.out).with_suffix(".lab"), "--out (its .lab file)")
+        lab = Path(args.out).with_suffix(".lab")
+        output_file(lab, "--out (its .lab file)")
+        if lab.exists() and not Path(args.out).exists() and not args.force:
+            raise UsageError(
+                f"--out {args.out}: writing it would replace {lab}, which belongs to no "
+                f"{Path(args.out).name}; remove it, choose another --out, or add --force"
+            )
     if args.scenario is None:
         fmt = model_format(args.file, args.format, "--format")
         input_file(args.file, "model file")

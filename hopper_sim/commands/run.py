@@ -255,6 +255,11 @@ def run(args: argparse.Namespace) -> int:
     rrd = None if args.no_rrd else output_file(args.rrd or f"runs/{stem}.rrd", "--rrd", (".rrd",))
     png = None if args.no_png else figure_file(args.png or f"runs/{stem}.png", "--png")
     if args.q_table:
+        if sc.reward_known:
+            raise UsageError(
+                f"--q-table {args.q_table}: scenario {sc.name} has a known reward, so nothing "
+                "is learnt to load or save (--q-table is for unknown-reward scenarios)"
+            )
         output_file(args.q_table, "--q-table")
     from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
     from hopper_sim.provenance import provenance
@@ -279,8 +284,9 @@ def run(args: argparse.Namespace) -> int:
     env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
     try:
         runner = NavigationRunner(sc, env=env, settings=settings, learner=learner)
-    except ValueError as err:  # e.g. a Q-table of another product size
-        raise UsageError(f"--q-table {args.q_table}: {err}") from None
+    except ValueError as err:  # e.g. a Q-table of another product size, a formula too hard
+        where = f"--q-table {args.q_table}" if learner is not None else f"scenario {sc.name}"
+        raise UsageError(f"{where}: {' '.join(str(err).split())}") from None
 
     prepare_kernels("hopnav run", quiet=args.quiet or args.json)
     for path in (rrd, png):

@@ -11,18 +11,21 @@ overlaid; :mod:`hopper_sim.sweep_plot`) to ``--out``.
 The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
 number of workers.
 
-``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted (or
-Ctrl-C'd) sweep leaves the runs it finished; ``--resume`` reuses them (same scenario, checked
-through the scenario digest of ``sweep_meta.json`` and of the rows; a run is reused when its
-cell, run number and seed match) and runs the rest. Every file carries the provenance of
-:mod:`hopper_sim.provenance` (CSV columns, ``sweep_meta.json``, a line under the Markdown
-table).
+``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted
+(Ctrl-C, SIGTERM, or even SIGKILL) sweep leaves the runs it finished; ``--resume`` reuses
+them and runs the rest. ``sweep_meta.json``, written before the first run, names the
+scenario (its digest) and the grid (C and eps values, runs per cell, seed): ``--resume``
+refuses a folder of another scenario or grid, and a sweep without ``--resume`` refuses a
+folder that holds a sweep's results unless ``--force`` replaces them. Every file carries
+the provenance of :mod:`hopper_sim.provenance` (CSV columns, ``sweep_meta.json``, a line
+under the Markdown table).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -35,11 +38,27 @@ from hopnav.kernels import prepare_kernels
 META_FILE = "sweep_meta.json"
 
 
+#: The files of a sweep's results in ``--out`` (a folder holding one is a sweep's).
+RESULT_FILES = (
+    META_FILE,
+    "sweep_runs.csv",
+    "sweep_summary.csv",
+    "table_i.md",
+    "table_i.png",
+)
+
+
 def _levels(text: str) -> tuple[float, ...]:
+    parts = text.split(",")
     try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from err
+        values = tuple(float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers such as 0.25,0.5, got {text!r}"
+        ) from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -66,8 +85,49 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default=os.path.join("runs", "sweep"), help="[runs/sweep]")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.add_argument("--resume", action="store_true", help="reuse the finished runs found in --out")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--resume", action="store_true", help="reuse the finished runs found in --out"
+    )
+    mode.add_argument(
+        "--force", action="store_true", help="replace the results of another sweep in --out"
+    )
     p.set_defaults(func=run)
+
+
+def _kept(finished: list, rows: Path) -> str:
+    if not finished:
+        return "no run had finished; add --resume to start where it stopped"
+    return f"the {len(finished)} finished runs are in {rows}; add --resume to run only the others"
+
+
+def grid_record(spec: Any) -> dict[str, Any]:
+    """The grid of a sweep as recorded in ``sweep_meta.json`` (what ``--resume`` must match)."""
+    return {"cs": list(spec.cs), "epss": list(spec.epss), "runs": spec.runs, "seed": spec.seed}
+
+
+def _describe(grid: Any) -> str:
+    if not isinstance(grid, dict):
+        return repr(grid)
+    return (
+        f"C {grid.get('cs')}, eps {grid.get('epss')}, {grid.get('runs')} runs per cell, "
+        f"seed {grid.get('seed')}"
+    )
+
+
+def _refuse_overwrite(out: Path, force: bool) -> None:
+    """Refuse to write into a folder holding another sweep's results, unless ``force``
+    (then those files are removed first)."""
+    present = [name for name in RESULT_FILES if (out / name).exists()]
+    if not present:
+        return
+    if not force:
+        raise UsageError(
+            f"--out {out} holds the results of a sweep ({', '.join(present)}); add --resume "
+            "to continue that sweep, --force to replace its results, or choose another --out"
+        )
+    for name in present:
+        (out / name).unlink()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,10 +161,18 @@ def run(args: argparse.Namespace) -> int:
     try:
         scenario = load_scenario(args.scenario)
         spec = SweepSpec(
-            cs=args.cs or PAPER_CS, epss=args.epss or PAPER_EPSS, runs=args.runs, seed=args.seed
+            cs=PAPER_CS if args.cs is None else args.cs,
+            epss=PAPER_EPSS if args.epss is None else args.epss,
+            runs=args.runs,
+            seed=args.seed,
         )
         prov = provenance(scenario, DEFAULT_CHECKPOINT)  # the runs use the shipped controller
-        previous = _previous_rows(out, prov, read_rows_csv) if args.resume else []
+        grid = grid_record(spec)
+        if args.resume:
+            previous = _previous_rows(out, prov, grid, read_rows_csv)
+        else:
+            _refuse_overwrite(out, args.force)
+            previous = []
         if args.backend == "ray":
             from hopper_sim.sweep import _import_ray
 
@@ -115,13 +183,14 @@ def run(args: argparse.Namespace) -> int:
         prepare_kernels("hopnav sweep", quiet=args.json)  # once, before the workers start
     order = {(t.c, t.eps, t.run, t.seed): t.index for t in spec.tasks()}
     finished: list[SweepRow] = [r for r in previous if (r.c, r.eps, r.run, r.seed) in order]
+    # the folder is this sweep's from now on (written before the first run starts)
+    meta = {**prov, "provenance": prov, "grid": grid}
+    atomic_write_text(out / META_FILE, json.dumps(meta, indent=2) + "\n")
     bar = tqdm(total=spec.n_runs, unit="run", desc=f"sweep {scenario.name}", disable=args.json)
 
     def progress(done: int, total: int, row: SweepRow) -> None:
         if done == 1:
             bar.update(spec.n_runs - total - bar.n)  # the reused runs
-            meta = {**prov, "provenance": prov}
-            atomic_write_text(out / META_FILE, json.dumps(meta, indent=2) + "\n")
         finished.append(row)
         finished.sort(key=lambda r: order[(r.c, r.eps, r.run, r.seed)])
         atomic_write_text(out / ROWS_FILE, rows_csv(finished, prov))
@@ -141,15 +210,9 @@ def run(args: argparse.Namespace) -> int:
     except (SweepBackendError, SweepError) as err:
         raise UsageError(str(err)) from None
     except SweepRunError as err:
-        raise RunFailed(
-            f"{err}; the {len(finished)} finished runs are in {out / ROWS_FILE}; after a fix, "
-            "add --resume to run only the others"
-        ) from None
+        raise RunFailed(f"{err}; {_kept(finished, out / ROWS_FILE)}, after a fix") from None
     except KeyboardInterrupt:
-        raise RunFailed(
-            f"interrupted; the {len(finished)} finished runs are in {out / ROWS_FILE}; add "
-            "--resume to run only the others"
-        ) from None
+        raise RunFailed(f"interrupted; {_kept(finished, out / ROWS_FILE)}") from None
     finally:
         bar.close()
     paths = write_outputs(result, args.out, prov)
@@ -172,33 +235,53 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _previous_rows(
-    out: Path, prov: dict[str, Any], read_rows: Callable[[Path], list[Any]]
+    out: Path, prov: dict[str, Any], grid: dict[str, Any], read_rows: Callable[[Path], list[Any]]
 ) -> list[Any]:
     """The finished rows in ``out`` for ``--resume``; empty if there are none.
 
     Raises:
-        SweepError: ``sweep_meta.json`` is missing or unreadable.
+        SweepError: ``sweep_meta.json`` is missing, unreadable or not a JSON object, or
+            records another grid.
         ProvenanceError: the meta file or a row belongs to another scenario.
+        SweepFileError: the rows file is unreadable.
     """
     import csv
+    import io
 
     from hopper_sim.provenance import ProvenanceError, require_same_scenario
     from hopper_sim.sweep import SweepError
-    from hopper_sim.sweep_files import ROWS_FILE
+    from hopper_sim.sweep_files import MAX_CSV_BYTES, ROWS_FILE, SweepFileError
+    from planner.textfile import read_text
 
     rows_path, meta_path = out / ROWS_FILE, out / META_FILE
-    if not rows_path.is_file():
+    if not rows_path.is_file() and not meta_path.exists():
         return []
     try:
-        meta = json.loads(meta_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise SweepError(f"cannot resume: {meta_path} is missing or unreadable ({err})") from err
+        meta = json.loads(read_text(meta_path, SweepError, 1 << 20))
+    except ValueError as err:  # SweepError, or a JSONDecodeError
+        raise SweepError(f"cannot resume: {meta_path} is missing or unreadable ({err})") from None
+    if not isinstance(meta, dict):
+        raise SweepError(
+            f"cannot resume: {meta_path} holds a {type(meta).__name__}, not a JSON object "
+            "(use another --out, or --force to start over)"
+        )
     try:
         require_same_scenario(meta, prov, f"{meta_path}")
-        with rows_path.open(encoding="utf-8", newline="") as fh:
-            digests = {row.get("scenario_sha256") for row in csv.DictReader(fh)}
+        if not rows_path.is_file():
+            digests: set[Any] = set()
+        else:
+            text = read_text(rows_path, SweepFileError, MAX_CSV_BYTES)
+            digests = {row.get("scenario_sha256") for row in csv.DictReader(io.StringIO(text))}
         for digest in digests - {prov["scenario_sha256"]}:
             require_same_scenario({"scenario_sha256": digest}, prov, f"a row of {rows_path}")
     except ProvenanceError as err:
         raise ProvenanceError(f"cannot resume: {err} (or use another --out)") from None
-    return read_rows(rows_path)
+    except csv.Error as err:
+        raise SweepFileError(f"cannot resume: {rows_path}: malformed CSV ({err})") from None
+    if meta.get("grid") != grid:
+        raise SweepError(
+            f"cannot resume: {out} holds a sweep of another grid ({_describe(meta.get('grid'))}); "
+            f"this one is {_describe(grid)} (use the same --cs/--epss/--runs/--seed, another "
+            "--out, or --force to start over)"
+        )
+    return read_rows(rows_path) if rows_path.is_file() else []

@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 from hopnav.arguments import (
-    at_least,
     input_file,
+    int_range,
     non_negative_int,
     output_file,
     positive_float,
@@ -30,6 +30,12 @@ from hopnav.errors import RunFailed, UsageError
 
 #: Fewest hops to simulate: the held-out tenth must hold enough hops to measure the model.
 MIN_SAMPLES = 100
+#: Most hops to simulate (the dataset is held in memory: about 100 bytes per hop).
+MAX_SAMPLES = 10_000_000
+#: Most hidden layers and widest layer (as :mod:`hopper_sim.controller.checkpoint` reads).
+MAX_LAYERS, MAX_WIDTH = 16, 4096
+#: Most simulation or torch threads.
+MAX_THREADS = 1024
 DEFAULT_OUT = Path("runs") / "controller.pt"
 
 
@@ -42,6 +48,10 @@ def _widths(text: str) -> tuple[int, ...]:
         ) from None
     if not widths or min(widths) < 1:
         raise argparse.ArgumentTypeError(f"layer widths must be >= 1, got {text!r}")
+    if len(widths) > MAX_LAYERS or max(widths) > MAX_WIDTH:
+        raise argparse.ArgumentTypeError(
+            f"at most {MAX_LAYERS} layers of at most {MAX_WIDTH} units, got {text!r}"
+        )
     return widths
 
 
@@ -53,7 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--samples",
-        type=at_least(MIN_SAMPLES, "a tenth of them is held out to measure the model"),
+        type=int_range(
+            MIN_SAMPLES, MAX_SAMPLES, "a tenth of them is held out to measure the model"
+        ),
         default=60_000,
         help="hops to simulate [60000]",
     )
@@ -81,8 +93,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=2.0,
         help="hop length of the steady gait v_des [m]",
     )
-    p.add_argument("--nthread", type=positive_int, default=None, help="simulation threads")
-    p.add_argument("--torch-threads", type=positive_int, default=1)
+    threads = int_range(1, MAX_THREADS)
+    p.add_argument("--nthread", type=threads, default=None, help="simulation threads")
+    p.add_argument("--torch-threads", type=threads, default=1)
     p.add_argument(
         "--allow-weak",
         action="store_true",

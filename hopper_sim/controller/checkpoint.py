@@ -1,7 +1,8 @@
 """Saving and loading trained hop models with their provenance.
 
-A checkpoint is one ``torch.save`` file holding plain data only (tensors, numbers, strings,
-lists, dicts), read back with ``torch.load(weights_only=True)``:
+A checkpoint file is sealed (:mod:`planner.sealed`): a header line with the SHA-256 of all
+its bytes, then one ``torch.save`` payload holding plain data only (tensors, numbers,
+strings, lists, dicts), read back with ``torch.load(weights_only=True)``:
 
     format        "hopnav-hop-model"
     version       CHECKPOINT_VERSION
@@ -11,7 +12,10 @@ lists, dicts), read back with ``torch.load(weights_only=True)``:
     state_dict    weights and normalisation buffers
     metadata      free-form JSON-able dict (seed, metrics, steady state, thrust, ...)
 
-Loading validates everything and raises :class:`CheckpointCorruptError`,
+Loading checks the digest first (a flipped bit anywhere in the file, a truncation or an
+appended tail is :class:`CheckpointCorruptError`), then validates every field, and refuses
+weights whose magnitude exceeds :data:`MAX_WEIGHT` (no trained hop model comes near it; a
+corrupted float can be finite and huge). It raises :class:`CheckpointCorruptError`,
 :class:`CheckpointVersionError` or :class:`CheckpointModelMismatchError`. Writes are atomic.
 """
 
@@ -35,9 +39,19 @@ from hopper_sim.controller.errors import (
 )
 from hopper_sim.controller.hop_model import N_OUTPUTS, HopNet, InputRanges
 from planner.atomic import atomic_write
+from planner.sealed import SealError, read_limited, seal, unseal
 
 CHECKPOINT_FORMAT = "hopnav-hop-model"
-CHECKPOINT_VERSION = 1
+#: 2: sealed with a digest of the file (version 1 files have none and are refused).
+CHECKPOINT_VERSION = 2
+#: The kind named in the sealed file's header.
+SEAL_KIND = "hop-model-checkpoint"
+#: Largest checkpoint file read [bytes] (the shipped one is about 0.2 MiB).
+MAX_CHECKPOINT_BYTES = 256 * 2**20
+#: Most hidden layers, and widest layer, of a checkpoint read (checked before allocating).
+MAX_LAYERS, MAX_WIDTH = 16, 4096
+#: Largest magnitude of a weight or normalisation value accepted on load.
+MAX_WEIGHT = 1.0e4
 #: The shipped checkpoint (package data, ``hopper_sim/data/controller.pt``).
 DEFAULT_CHECKPOINT = Path(str(resources.files("hopper_sim") / "data" / "controller.pt"))
 
@@ -69,7 +83,7 @@ def save_checkpoint(checkpoint: HopModelCheckpoint, path: str | os.PathLike) -> 
     torch.save(payload, buf)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as fh:
-        fh.write(buf.getvalue())
+        fh.write(seal(SEAL_KIND, buf.getvalue()))
     return path
 
 
@@ -94,10 +108,23 @@ def load_checkpoint(
     """
     path = Path(path)
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+        data = read_limited(path, MAX_CHECKPOINT_BYTES)
     except FileNotFoundError:
         raise
-    except Exception as exc:  # torch raises many types for unreadable files
+    except (OSError, SealError) as exc:
+        raise CheckpointCorruptError(f"{path}: cannot be read as a checkpoint ({exc})") from exc
+    if data.startswith(b"PK\x03\x04"):
+        raise CheckpointVersionError(
+            f"{path}: checkpoint version 1 (no digest of its contents), this code reads "
+            f"version {CHECKPOINT_VERSION}; retrain it with `hopnav train-controller`"
+        )
+    try:
+        raw = unseal(data, SEAL_KIND)
+    except SealError as exc:
+        raise CheckpointCorruptError(f"{path}: not an intact checkpoint: {exc}") from None
+    try:
+        payload = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for unreadable payloads
         raise CheckpointCorruptError(f"{path}: cannot be read as a checkpoint ({exc})") from exc
     if not isinstance(payload, dict):
         raise CheckpointCorruptError(f"{path}: top level is {type(payload).__name__}, not a dict")
@@ -116,6 +143,13 @@ def load_checkpoint(
             f"parameters hash to {expected_param_hash}; retrain with `hopnav train-controller`"
         )
     hidden = _field(payload, "hidden", list, path)
+    if not (
+        1 <= len(hidden) <= MAX_LAYERS
+        and all(isinstance(h, int) and 1 <= h <= MAX_WIDTH for h in hidden)
+    ):
+        raise CheckpointCorruptError(
+            f"{path}: layer widths {hidden!r} are not 1..{MAX_LAYERS} widths of 1..{MAX_WIDTH}"
+        )
     state = _field(payload, "state_dict", dict, path)
     try:
         metadata = json.loads(_field(payload, "metadata_json", str, path))
@@ -124,7 +158,13 @@ def load_checkpoint(
         net.load_state_dict(state, strict=True)
     except (ValueError, RuntimeError, TypeError) as exc:
         raise CheckpointCorruptError(f"{path}: malformed checkpoint contents ({exc})") from exc
-    if not all(torch.isfinite(t).all() for t in net.state_dict().values()):
-        raise CheckpointCorruptError(f"{path}: weights hold non-finite values")
+    for name, t in net.state_dict().items():
+        if not bool(torch.isfinite(t).all()):
+            raise CheckpointCorruptError(f"{path}: weights {name!r} hold non-finite values")
+        if t.numel() and float(t.abs().max()) > MAX_WEIGHT:
+            raise CheckpointCorruptError(
+                f"{path}: weights {name!r} reach {float(t.abs().max()):.3g}, beyond the "
+                f"plausible magnitude {MAX_WEIGHT:g}"
+            )
     net.eval()
     return HopModelCheckpoint(net, param_hash, metadata)

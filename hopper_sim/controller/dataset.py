@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,21 +211,35 @@ def save_dataset(dataset: HopDataset, path: str | os.PathLike) -> Path:
     return path
 
 
+#: Largest dataset read (its arrays, uncompressed) [bytes].
+MAX_DATASET_BYTES = 1 << 30
+
+
 def load_dataset(path: str | os.PathLike) -> HopDataset:
     """Read a dataset written by :func:`save_dataset`; malformed files raise
     :class:`DatasetError` naming the file and the problem."""
     path = Path(path)
     try:
+        with zipfile.ZipFile(path) as zf:  # sizes checked before anything is decompressed
+            size = sum(info.file_size for info in zf.infolist())
+        if size > MAX_DATASET_BYTES:
+            raise DatasetError(
+                f"{path}: its arrays hold {size} bytes, more than the limit of {MAX_DATASET_BYTES}"
+            )
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in ("inputs", "outputs", "ok", "status", "metadata_json")}
     except KeyError as exc:
         raise DatasetError(f"{path}: missing array {exc}") from exc
-    except (OSError, ValueError) as exc:
+    except DatasetError:
+        raise
+    except Exception as exc:  # zipfile, zlib and numpy raise many types for a damaged file
         raise DatasetError(f"{path}: not a readable .npz dataset ({exc})") from exc
     try:
         meta = json.loads(str(arrays["metadata_json"]))
-    except json.JSONDecodeError as exc:
+    except ValueError as exc:
         raise DatasetError(f"{path}: metadata is not valid JSON ({exc})") from exc
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path}: metadata is not a JSON object")
     if meta.get("version") != DATASET_VERSION:
         raise DatasetError(
             f"{path}: dataset version {meta.get('version')!r}, this code reads {DATASET_VERSION}"

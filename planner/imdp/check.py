@@ -28,6 +28,7 @@ from planner.errors import UnknownPropositionError
 from planner.imdp.model import IMDP
 from planner.imdp.product import ProductIMDP
 from planner.imdp.solve import Solution, ValueIteration
+from planner.ltl.budget import TranslationLimits
 from planner.ltl.parser import parse
 from planner.ltl.syntax import to_string
 from planner.ltl.translate import translate
@@ -63,13 +64,18 @@ def check_ltl(
     formula: str,
     optimistic: bool = False,
     algorithm: ValueIteration | None = None,
+    limits: TranslationLimits | None = None,
 ) -> LTLCheck:
-    """Satisfaction probability of ``formula`` from every state of ``model``.
+    """Satisfaction probability of ``formula`` from every state of ``model``; ``limits``
+    bound the translation (default :class:`planner.ltl.budget.TranslationLimits`).
 
     Raises:
         LTLSyntaxError: the formula does not parse.
         UnknownPropositionError: the formula names a proposition that is not one of the
             model's labels.
+        TranslationLimitError: the translation exceeds ``limits``.
+        ProductError: the product would exceed
+            :func:`planner.imdp.product.check_product_size`.
     """
     f = parse(formula)
     props = sorted(f.propositions())
@@ -80,7 +86,7 @@ def check_ltl(
             f"formula {to_string(f)!r} uses proposition {missing[0]!r}, which is not a label "
             f"of the model (its labels: {have})"
         )
-    automaton = translate(f, props)
+    automaton = translate(f, props, limits)
     product = ProductIMDP(model, automaton)
     sol = product.satisfaction(pessimistic=not optimistic, algorithm=algorithm)
     entry = (

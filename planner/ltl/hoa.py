@@ -17,6 +17,12 @@ the acceptance formula is put in disjunctive normal form, each disjunct
 ``Fin(..) & .. & Inf(I_1) & .. & Inf(I_k)`` becomes one Rabin pair, with a round-robin
 counter over ``I_1 .. I_k`` when ``k >= 2`` (degeneralisation). The result is reduced with
 :func:`planner.ltl.reduce.reduce_rabin`.
+
+Reading is bounded as a translation is (:mod:`planner.ltl.budget`): at most 16 propositions
+(``2^16`` letters), ``States:`` times letters at most ``2^22`` table entries (checked before
+the table is allocated), label and acceptance expressions nested at most
+:data:`MAX_NESTING` deep, acceptance conditions of at most :data:`MAX_DISJUNCTS` disjuncts,
+and the default time limit.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import numpy as np
 from planner.automaton import RabinAutomaton, RabinPair
 from planner.errors import HOAError, NondeterministicAutomatonError
 from planner.ltl.boolean import cover
+from planner.ltl.budget import TranslationLimits, limited, tick
 from planner.ltl.interning import intern
 from planner.ltl.reduce import reduce_rabin
 
@@ -125,9 +132,21 @@ def _lex(text: str) -> list[_Tok]:
     return toks
 
 
+#: Deepest nesting of a label or acceptance expression (parentheses, negations, aliases).
+MAX_NESTING = 100
+#: Most disjuncts of an acceptance condition in disjunctive normal form (Rabin pairs).
+MAX_DISJUNCTS = 4096
+
+
 class _Reader:
     def __init__(self, toks: list[_Tok]) -> None:
         self.toks, self.i = toks, 0
+        self.depth = 0
+
+    def enter(self, tok: _Tok) -> None:
+        self.depth += 1
+        if self.depth > MAX_NESTING:
+            raise HOAError(f"line {tok.line}: expression nested deeper than {MAX_NESTING}")
 
     def peek(self) -> _Tok:
         return self.toks[self.i]
@@ -144,7 +163,11 @@ class _Reader:
         return t
 
     def integer(self, what: str) -> int:
-        return int(self.expect("int", what).text)
+        tok = self.expect("int", what)
+        try:
+            return int(tok.text)
+        except ValueError:  # more digits than Python converts
+            raise HOAError(f"line {tok.line}: {what}: {len(tok.text)} digits") from None
 
     def is_punct(self, ch: str) -> bool:
         t = self.peek()
@@ -169,15 +192,21 @@ def _parse_and(r: _Reader, atom):
 
 
 def _parse_not(r: _Reader, atom):
-    if r.is_punct("!"):
-        r.take()
-        return ("!", _parse_not(r, atom))
+    negations = 0
+    while r.is_punct("!"):  # a run of negations, iteratively
+        r.enter(r.take())
+        negations += 1
     if r.is_punct("("):
-        r.take()
+        r.enter(r.take())
         inner = _parse_or(r, atom)
         r.expect("punct", "')'", ")")
-        return inner
-    return atom(r)
+        r.depth -= 1
+    else:
+        inner = atom(r)
+    for _ in range(negations):
+        inner = ("!", inner)
+    r.depth -= negations
+    return inner
 
 
 def _strip_quotes(raw: str) -> str:
@@ -188,10 +217,17 @@ def from_hoa(text: str) -> RabinAutomaton:
     """Read a deterministic HOA v1 automaton as a state-based Rabin automaton.
 
     Raises:
-        HOAError: malformed or unsupported input (names the line).
+        HOAError: malformed, unsupported or too large input (names the line).
         NondeterministicAutomatonError: several initial states, overlapping edge labels,
             or universal branching.
+        TranslationLimitError: reading took longer than the default time limit.
     """
+    with limited(TranslationLimits()):
+        return _from_hoa(text)
+
+
+def _from_hoa(text: str) -> RabinAutomaton:
+    limits = TranslationLimits()
     r = _Reader(_lex(text))
     first = r.expect("header", "'HOA:' at the start", "HOA:")
     version = r.expect("ident", "a format version after 'HOA:'")
@@ -221,6 +257,11 @@ def from_hoa(text: str) -> RabinAutomaton:
             start = s
         elif h.text == "AP:":
             count = r.integer("the number of propositions after 'AP:'")
+            if (1 << min(count, 63)) > limits.max_letters:
+                raise HOAError(
+                    f"line {h.line}: {count} propositions, more than the limit of "
+                    f"{limits.max_letters.bit_length() - 1} ({limits.max_letters} letters)"
+                )
             aps = []
             while r.peek().kind == "string":
                 aps.append(_strip_quotes(r.take().text))
@@ -251,8 +292,15 @@ def from_hoa(text: str) -> RabinAutomaton:
     _check_sets(acceptance, n_sets, body.line)
     n_props = len(aps)
     n_letters = 1 << n_props
+    if n_states * n_letters > limits.max_entries:
+        raise HOAError(
+            f"line {body.line}: {n_states} states x {n_letters} letters, more than the limit "
+            f"of {limits.max_entries} table entries"
+        )
     all_letters = (1 << n_letters) - 1
     with_bit = [sum(1 << x for x in range(n_letters) if x >> b & 1) for b in range(n_props)]
+
+    resolving: list[str] = []
 
     def letters_of(expr, line: int) -> int:
         if isinstance(expr, _Tok):
@@ -261,7 +309,15 @@ def from_hoa(text: str) -> RabinAutomaton:
             if expr.kind == "alias":
                 if expr.text not in aliases:
                     raise HOAError(f"line {line}: unknown alias {expr.text}")
-                return letters_of(aliases[expr.text], line)
+                if expr.text in resolving:
+                    raise HOAError(f"line {line}: alias {expr.text} is defined through itself")
+                if len(resolving) >= MAX_NESTING:
+                    raise HOAError(f"line {line}: aliases nested deeper than {MAX_NESTING}")
+                resolving.append(expr.text)
+                try:
+                    return letters_of(aliases[expr.text], line)
+                finally:
+                    resolving.pop()
             b = int(expr.text)
             if b >= n_props:
                 raise HOAError(f"line {line}: proposition {b} is not in [0, {n_props})")
@@ -320,6 +376,7 @@ def from_hoa(text: str) -> RabinAutomaton:
             if not 0 <= target < n_states:
                 raise HOAError(f"line {e_line}: edge target {target} is not in [0, {n_states})")
             edge_marks = state_marks | _acc_sig(r, n_sets)
+            tick(n_letters)
             letter_idx = [x for x in range(n_letters) if letters >> x & 1]
             clash = [x for x in letter_idx if table[q, x] >= 0]
             if clash:
@@ -402,6 +459,11 @@ def _dnf(cond) -> list[list[tuple[str, int, bool]]]:
         return [c for p in parts for c in p]
     out: list[list[tuple[str, int, bool]]] = [[]]
     for p in parts:
+        if len(out) * len(p) > MAX_DISJUNCTS:
+            raise HOAError(
+                f"the acceptance condition has more than {MAX_DISJUNCTS} disjuncts in "
+                "disjunctive normal form"
+            )
         out = [a + b for a in out for b in p]
     return out
 

@@ -9,14 +9,21 @@ Grammar (lowest to highest precedence, as in Spot's ``ltlparse.yy``)::
     U  R  V  W  M          right associative (V is R)
     X  F  G  []  <>        prefix
     !  ~                   prefix
-    atoms: true false 1 0, identifiers [A-Za-z_][A-Za-z0-9_.]*, "double-quoted names",
-           parenthesised formulas
+    atoms: true false 1 0, identifiers [A-Za-z_][A-Za-z0-9_]*, "double-quoted names"
+           (printable, no double quote), parenthesised formulas
 
 Identifiers are read by maximal munch, so ``Goal`` and ``GFa`` are propositions; an
 identifier made only of the letters ``F G X`` (``GF``, ``XX``, ``FG``) is a run of prefix
 operators, so ``GF a`` is ``G F a``. (Spot also reads some glued forms such as ``GFa`` as
 operators; write them with a space here.) A keyword (``X F G U R V W M xor true false``) is
 never a proposition unless double-quoted.
+
+Limits (checked while parsing, so hostile input fails with an :class:`LTLSyntaxError` naming
+the position, never with a ``RecursionError``): at most :data:`MAX_TOKENS` tokens, and
+operators nested at most :data:`MAX_DEPTH` deep (parentheses, prefix operators and
+right-associative chains each add a level; a chain of ``&`` or ``|`` is one n-ary node and
+adds one). Every later stage (simplification, translation, printing) recurses at most that
+deep.
 """
 
 from __future__ import annotations
@@ -32,9 +39,9 @@ _TOKEN = re.compile(
     r"""
     (?P<ws>\s+)
   | (?P<op><->|<=>|->|=>|&&|\|\||/\\|\\/|\[\]|<>|[!~&|^()])
-  | (?P<ident>[A-Za-z_][A-Za-z0-9_.]*)
+  | (?P<ident>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<num>[0-9]+)
-  | (?P<quoted>"[^"]*")
+  | (?P<quoted>"[^"\x00-\x1f\x7f]*")
   """,
     re.VERBOSE,
 )
@@ -69,6 +76,23 @@ _BINARY = {
 }
 _PREFIX = frozenset({"!", "X", "F", "G"})
 
+#: Most tokens in a formula.
+MAX_TOKENS = 10_000
+#: Deepest nesting of operators in a formula (see the module docstring).
+MAX_DEPTH = 100
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def is_plain_name(name: str) -> bool:
+    """Whether ``name`` is a proposition written without quotes: an identifier
+    ``[A-Za-z_][A-Za-z0-9_]*`` that is not a keyword or a run of ``F G X``."""
+    return (
+        isinstance(name, str)
+        and _NAME.fullmatch(name) is not None
+        and name not in _KEYWORDS
+        and _PREFIX_RUN.fullmatch(name) is None
+    )
+
 
 class _Token:
     __slots__ = ("kind", "pos", "text", "value")
@@ -81,9 +105,20 @@ def _tokens(text: str) -> list[_Token]:
     out: list[_Token] = []
     pos = 0
     while pos < len(text):
+        if len(out) >= MAX_TOKENS:
+            raise LTLSyntaxError(
+                f"formula longer than {MAX_TOKENS} tokens (the limit) at position {pos}", pos
+            )
         m = _TOKEN.match(text, pos)
         if m is None:
             if text[pos] == '"':
+                end = text.find('"', pos + 1)
+                if end >= 0:
+                    raise LTLSyntaxError(
+                        f"quoted name starting at position {pos} holds a control character "
+                        "(a newline, tab, ...)",
+                        pos,
+                    )
                 raise LTLSyntaxError(f"unterminated quoted name starting at position {pos}", pos)
             raise LTLSyntaxError(f"unexpected character {text[pos]!r} at position {pos}", pos)
         kind = m.lastgroup or ""
@@ -117,6 +152,16 @@ class _Parser:
     def __init__(self, text: str) -> None:
         self.toks = _tokens(text)
         self.i = 0
+        self.depth = 0  # operators open around the current position
+
+    def enter(self, tok: _Token) -> None:
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise LTLSyntaxError(
+                f"formula nested deeper than {MAX_DEPTH} operators (the limit) at position "
+                f"{tok.pos}",
+                tok.pos,
+            )
 
     def peek(self) -> _Token:
         return self.toks[self.i]
@@ -131,25 +176,51 @@ class _Parser:
         return LTLSyntaxError(f"expected {expected} at position {tok.pos}, found {found}", tok.pos)
 
     def formula(self, min_prec: int = 1) -> Formula:
+        self.enter(self.peek())
         left = self.unary()
+        operands: list[Formula] = []  # of a chain of one n-ary operator (& or |)
+        chain = None
         while True:
             tok = self.peek()
             if tok.kind != "op" or tok.value not in _BINARY:
-                return left
+                break
             prec, right = _BINARY[tok.value]
             if prec < min_prec:
-                return left
+                break
             self.take()
             rhs = self.formula(prec if right else prec + 1)
-            left = _make_binary(tok.value, left, rhs)
+            if tok.value in ("&", "|"):
+                if chain != tok.value:
+                    left = _close(chain, left, operands)
+                    chain, operands = tok.value, [left]
+                operands.append(rhs)
+                continue
+            left = _close(chain, left, operands)
+            chain, operands = None, []
+            left = Formula(tok.value, (left, rhs))
+            if left.depth > MAX_DEPTH:
+                raise LTLSyntaxError(
+                    f"formula nested deeper than {MAX_DEPTH} operators (the limit) at "
+                    f"position {tok.pos}",
+                    tok.pos,
+                )
+        self.depth -= 1
+        return _close(chain, left, operands)
 
     def unary(self) -> Formula:
-        tok = self.peek()
-        if tok.kind == "op" and tok.value in _PREFIX:
+        opened = []
+        while True:  # a run of prefix operators, iteratively
+            tok = self.peek()
+            if tok.kind != "op" or tok.value not in _PREFIX:
+                break
             self.take()
-            arg = self.unary()
-            return Formula(tok.value, (arg,))
-        return self.atom()
+            self.enter(tok)
+            opened.append(tok.value)
+        f = self.atom()
+        for op in reversed(opened):
+            f = Formula(op, (f,))
+        self.depth -= len(opened)
+        return f
 
     def atom(self) -> Formula:
         tok = self.take()
@@ -169,10 +240,11 @@ class _Parser:
         raise self.fail(tok, "a proposition, constant, unary operator or '('")
 
 
-def _make_binary(op: str, left: Formula, right: Formula) -> Formula:
-    if op in ("&", "|"):
-        return Formula(op, (left, right))
-    return Formula(op, (left, right))
+def _close(chain: str | None, left: Formula, operands: list[Formula]) -> Formula:
+    """The n-ary node of a chain ``operands[0] op operands[1] op ...`` (``left`` if none)."""
+    if chain is None:
+        return left
+    return Formula(chain, tuple(operands))
 
 
 def parse(formula: str) -> Formula:

@@ -20,6 +20,7 @@ A DNF equal to :data:`TT` is ``true``, one equal to :data:`FF` is ``false``.
 
 from __future__ import annotations
 
+from planner.ltl.budget import tick
 from planner.ltl.interning import intern
 from planner.ltl.syntax import FALSE, TRUE, Formula
 
@@ -32,6 +33,7 @@ def minimal(terms) -> frozenset[int]:
     """Drop every term that contains (as a bitmask superset) another term."""
     kept: list[int] = []
     for t in sorted(set(terms), key=int.bit_count):
+        tick(1 + len(kept))
         if not any(k & t == k for k in kept):
             kept.append(t)
     return frozenset(kept)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planner.ltl.budget import tick
 from planner.ltl.interning import intern
 from planner.ltl.syntax import Formula
 
@@ -61,9 +62,17 @@ def build_tgba(formula: Formula, propositions: tuple[str, ...]) -> TGBA:
 
     def expand(start: frozenset[Formula]) -> list[tuple[int, int, frozenset[Formula], int]]:
         results: list[tuple[int, int, frozenset[Formula], int]] = []
-
-        def go(todo: list[Formula], done: frozenset, pos: int, neg: int, nxt: frozenset, post: int):
+        # Depth-first over the branches, with an explicit stack (a formula with many
+        # disjunctions branches deeply); a branch pushed later is expanded first, so the
+        # second branch of a split is pushed before the first.
+        stack: list[tuple[list[Formula], frozenset, int, int, frozenset, int]] = [
+            (list(start), frozenset(), 0, 0, frozenset(), 0)
+        ]
+        while stack:
+            todo, done, pos, neg, nxt, post = stack.pop()
+            alive = True
             while todo:
+                tick()
                 f = todo.pop()
                 if f in done:
                     continue
@@ -72,16 +81,19 @@ def build_tgba(formula: Formula, propositions: tuple[str, ...]) -> TGBA:
                 if op == "true":
                     continue
                 if op == "false":
-                    return
+                    alive = False
+                    break
                 if op == "ap":
                     b = bit[f.name]
                     if neg & b:
-                        return
+                        alive = False
+                        break
                     pos |= b
                 elif op == "!":
                     b = bit[f.children[0].name]
                     if pos & b:
-                        return
+                        alive = False
+                        break
                     neg |= b
                 elif op == "&":
                     todo.extend(f.children)
@@ -90,36 +102,42 @@ def build_tgba(formula: Formula, propositions: tuple[str, ...]) -> TGBA:
                 elif op == "G":
                     todo.append(f.children[0])
                     nxt = nxt | {f}
-                elif op == "|":
-                    for c in f.children:
-                        go([*todo, c], done, pos, neg, nxt, post)
-                    return
-                elif op == "F":
-                    go([*todo, f.children[0]], done, pos, neg, nxt, post)
-                    go(todo, done, pos, neg, nxt | {f}, post | ev_bit[f])
-                    return
                 else:
-                    g, h = f.children
-                    if op == "U":
-                        go([*todo, h], done, pos, neg, nxt, post)
-                        go([*todo, g], done, pos, neg, nxt | {f}, post | ev_bit[f])
-                    elif op == "W":
-                        go([*todo, h], done, pos, neg, nxt, post)
-                        go([*todo, g], done, pos, neg, nxt | {f}, post)
-                    elif op == "R":
-                        go([*todo, g, h], done, pos, neg, nxt, post)
-                        go([*todo, h], done, pos, neg, nxt | {f}, post)
-                    else:  # M
-                        go([*todo, g, h], done, pos, neg, nxt, post)
-                        go([*todo, h], done, pos, neg, nxt | {f}, post | ev_bit[f])
-                    return
-            results.append((pos, neg, nxt, post))
+                    if op == "|":
+                        branches = [([*todo, c], nxt, post) for c in f.children]
+                    elif op == "F":
+                        branches = [
+                            ([*todo, f.children[0]], nxt, post),
+                            (todo, nxt | {f}, post | ev_bit[f]),
+                        ]
+                    else:
+                        g, h = f.children
+                        if op == "U":
+                            branches = [
+                                ([*todo, h], nxt, post),
+                                ([*todo, g], nxt | {f}, post | ev_bit[f]),
+                            ]
+                        elif op == "W":
+                            branches = [([*todo, h], nxt, post), ([*todo, g], nxt | {f}, post)]
+                        elif op == "R":
+                            branches = [([*todo, g, h], nxt, post), ([*todo, h], nxt | {f}, post)]
+                        else:  # M
+                            branches = [
+                                ([*todo, g, h], nxt, post),
+                                ([*todo, h], nxt | {f}, post | ev_bit[f]),
+                            ]
+                    for t, x, q in reversed(branches):
+                        stack.append((list(t), done, pos, neg, x, q))
+                    alive = False  # this branch continues in the pushed ones
+                    break
+            if alive:
+                results.append((pos, neg, nxt, post))
 
-        go(list(start), frozenset(), 0, 0, frozenset(), 0)
         # Drop options implied by another one (LTL2BA's transition simplification).
         unique = list(dict.fromkeys(results))
         kept = []
         for i, (p, n, x, q) in enumerate(unique):
+            tick(len(unique))
             if not any(
                 j != i and p2 & p == p2 and n2 & n == n2 and q2 & q == q2 and x2 <= x
                 for j, (p2, n2, x2, q2) in enumerate(unique)

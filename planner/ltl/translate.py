@@ -40,10 +40,11 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from planner.automaton import RabinAutomaton, RabinPair
-from planner.errors import AutomatonError
+from planner.errors import AutomatonError, LTLSyntaxError
+from planner.ltl.budget import TranslationLimits, count_state, limited, set_letters, tick
 from planner.ltl.compose import delay, product
 from planner.ltl.interning import intern
-from planner.ltl.parser import parse
+from planner.ltl.parser import MAX_DEPTH, is_plain_name, parse
 from planner.ltl.progression import FF, TT, Progression, dnf_and, explore
 from planner.ltl.reduce import reduce_rabin
 from planner.ltl.safra import determinise
@@ -56,7 +57,13 @@ def _alphabet(formula: Formula, propositions: Sequence[str] | None) -> tuple[str
     used = formula.propositions()
     if propositions is None:
         return tuple(sorted(used))
-    props = tuple(str(p) for p in propositions)
+    props = tuple(propositions)
+    for p in props:
+        if not isinstance(p, str) or not (is_plain_name(p) or p in used):
+            raise AutomatonError(
+                f"proposition name {p!r} is not a plain name (a letter or _, then letters, "
+                "digits or _; not an operator such as U, X, GF, true)"
+            )
     if len(set(props)) != len(props):
         raise AutomatonError(f"duplicate propositions in {props}")
     missing = sorted(used - set(props))
@@ -106,6 +113,7 @@ def _safra(f: Formula, props: tuple[str, ...]):
     for q in range(n_q):
         offset.append(n)
         n += max(1, len(relevant.get(scc[q], [])))
+    count_state(n, n_letters)  # before the tables are allocated
     succ = [[0] * n_letters for _ in range(n)]
     succ_acc = [[0] * n_letters for _ in range(n)]
     for q, edges in enumerate(tgba.edges):
@@ -113,6 +121,7 @@ def _safra(f: Formula, props: tuple[str, ...]):
         for lvl in range(max(1, len(rel))):
             row, row_acc = succ[offset[q] + lvl], succ_acc[offset[q] + lvl]
             for letters, target, acc in edges:
+                tick()
                 if scc[target] != scc[q]:
                     j, accepting = 0, False
                 else:
@@ -151,6 +160,7 @@ def _safra(f: Formula, props: tuple[str, ...]):
 def _nonempty_states(succ, succ_acc, n: int, n_letters: int) -> np.ndarray:
     src, dst, acc_src, acc_dst = [], [], [], []
     for q in range(n):
+        tick(n_letters)
         for a in range(n_letters):
             m, ma = succ[q][a], succ_acc[q][a]
             while m:
@@ -320,24 +330,44 @@ def _expand_alphabet(table: np.ndarray, own: tuple[str, ...], props: tuple[str, 
     return table[:, proj]
 
 
-def translate(formula: str | Formula, propositions: Sequence[str] | None = None) -> RabinAutomaton:
+def translate(
+    formula: str | Formula,
+    propositions: Sequence[str] | None = None,
+    limits: TranslationLimits | None = None,
+) -> RabinAutomaton:
     """Translate an LTL formula to an equivalent complete deterministic Rabin automaton.
 
     Args:
         formula: LTL text (see :func:`planner.ltl.parser.parse`) or a parsed formula.
         propositions: the alphabet, in letter-bit order; must contain every proposition of
-            the formula and may add others. Default: the formula's propositions, sorted.
+            the formula and may add others, each a plain name
+            (:func:`planner.ltl.parser.is_plain_name`) unless the formula uses it. Default:
+            the formula's propositions, sorted.
+        limits: letters, states, table entries and seconds the translation may use
+            (default :class:`~planner.ltl.budget.TranslationLimits`).
 
     Raises:
-        LTLSyntaxError: if ``formula`` does not parse.
-        AutomatonError: if ``propositions`` has duplicates or misses a proposition.
+        LTLSyntaxError: if ``formula`` does not parse, or a given formula nests deeper than
+            :data:`planner.ltl.parser.MAX_DEPTH`.
+        AutomatonError: if ``propositions`` has duplicates, a malformed name or misses a
+            proposition.
+        TranslationLimitError: a limit of ``limits`` was exceeded.
     """
+    limits = TranslationLimits() if limits is None else limits
     f = parse(formula) if isinstance(formula, str) else formula
+    if f.depth > MAX_DEPTH:
+        raise LTLSyntaxError(
+            f"formula nested {f.depth} operators deep, more than the limit of {MAX_DEPTH}", 0
+        )
     props = _alphabet(f, propositions)
-    g = simplify(f)
-    own = tuple(p for p in props if p in g.propositions())
-    table, initial, pairs, names = _translate(g, own)
-    table = _expand_alphabet(table, own, props)
+    limits.check_letters(len(props))
+    with limited(limits):
+        g = simplify(f)
+        own = tuple(p for p in props if p in g.propositions())
+        set_letters(1 << len(own))
+        table, initial, pairs, names = _translate(g, own)
+        count_state(table.shape[0], 1 << len(props))
+        table = _expand_alphabet(table, own, props)
     return RabinAutomaton(
         props,
         table,

@@ -70,7 +70,10 @@ def test_train_controller_help_names_the_default_destination(hopnav):
     [
         (lambda d: ["run", "--rrd", d / "x.rrd", "--no-png"], "--rrd"),
         (lambda d: ["run", "--png", d / "x.png", "--no-rrd"], "--png"),
-        (lambda d: ["run", "--q-table", d / "q.npz", "--no-rrd", "--no-png"], "--q-table"),
+        (
+            lambda d: ["run", "--scenario", "c", "--q-table", d / "q.npz", "--no-rrd", "--no-png"],
+            "--q-table",
+        ),
         (lambda d: ["scenario", "a", "--png", d / "world.png"], "--png"),
         (lambda d: ["sweep", "--runs", "1", "--out", d], "--out"),
         (lambda d: ["imdp", "export", "--scenario", "a", "--out", d / "p.drn"], "--out"),

@@ -189,3 +189,45 @@ def test_fixed_thrust_and_terrain_force_match_reference(model, command):
     # 1.7e-5 m at 300 N s/m); c < 0 switches off there, where its force is near zero.
     assert np.abs(hop.next_pos - ref.next_pos).max() <= 5e-5
     assert np.abs(hop.next_vel - ref.next_vel).max() <= 1e-4
+
+
+def test_inputs_outside_the_valid_range_are_refused(model):
+    from hopper_sim.hop import HopInputError, max_speed
+
+    assert max_speed(model.params) == pytest.approx(50.0)  # l0 = 1 m, dt = 1 ms
+    good = dict(pos=np.zeros(2), vel=np.array([4.0, 0.0, -1.0]), alpha=1.2, beta=0.0)
+    for change, match in (
+        ({"vel": np.array([1e6, 0.0, 0.0])}, "horizontal speed"),
+        ({"vel": np.array([4.0, 0.0, -60.0])}, r"\|vz\|"),
+        ({"beta": 100.0}, r"\|beta\|"),
+        ({"pos": np.array([1e300, 0.0])}, r"\|pos\|"),
+    ):
+        with pytest.raises(HopInputError, match=match):
+            simulate_hop(model, **{**good, **change})
+    with pytest.raises(HopInputError, match=r"\|noise\|"):
+        simulate_hop(model, **good, noise=np.array([1e6, 0.0]))
+
+
+def test_a_hop_that_falls_after_liftoff_is_not_ok(model):
+    """Fast and steep: the CoM still descends when the leg reaches l0 again, so there is no
+    next interstitial state (it used to come out ok with a negative flight time)."""
+    from hopper_sim.slip import time_to_height
+
+    assert np.isnan(time_to_height(np.array([0.9]), np.array([-1.0]), 1.0, 9.81))[0]
+    assert time_to_height(np.array([0.9]), np.array([2.0]), 1.0, 9.81)[0] > 0
+    r = simulate_hop(model, np.zeros(2), np.array([7.978377, 0.0, -3.611893]), 1.516089, 0.959644)
+    assert not r.ok and r.status == "no_touchdown" and r.flight_time is None
+
+
+def test_implausible_results():
+    from hopper_sim.hop import implausible
+
+    def one(td, lo, fl, e0, e1, passive):
+        return bool(implausible(*(np.array([x]) for x in (td, lo, fl, e0, e1, passive)))[0])
+
+    assert not one(0.05, 0.24, 0.28, 1464.8, 1464.8000015, True)
+    assert one(0.12, 0.12, -0.12, 4e13, 4e13, True)  # negative flight time
+    assert one(0.2, 0.1, 0.3, 100.0, 100.0, True)  # liftoff before touchdown
+    assert one(0.05, 0.24, 0.28, 1464.8, 1500.0, True)  # a passive hop gained energy
+    assert not one(0.05, 0.24, 0.28, 1464.8, 1500.0, False)  # thrust may add energy
+    assert one(0.05, 0.24, 0.28, 1464.8, np.inf, False)

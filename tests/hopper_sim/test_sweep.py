@@ -364,7 +364,13 @@ def test_command_writes_table_and_json(tmp_path, monkeypatch, capsys):
     assert record["files"]["rows"] == str(out / sf.ROWS_FILE)
     assert len(read_rows_csv(out / sf.ROWS_FILE)) == 4
 
-    assert hopnav(args) == 0
+    # another sweep into the folder of this one is refused (nothing touched) unless --force
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert hopnav(args) == 2
+    err = capsys.readouterr().err
+    assert "holds the results of a sweep" in err and len(err.strip().splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert hopnav([*args, "--force"]) == 0
     text = capsys.readouterr().out
     assert "P_RL,ee = C" in text and "[paper 139.75/83]" in text
     assert len(read_rows_csv(out / sf.ROWS_FILE)) == 18
@@ -436,7 +442,7 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     assert hopnav([*args, "--resume"]) == 0
     resumed = json.loads(capsys.readouterr().out)
     assert len(calls) == 2
-    assert hopnav(args) == 0  # from scratch
+    assert hopnav([*args, "--force"]) == 0  # from scratch
     fresh = json.loads(capsys.readouterr().out)
     assert resumed["rows"] == fresh["rows"] and resumed["cells"] == fresh["cells"]
 
@@ -455,6 +461,32 @@ def test_command_resumes_an_interrupted_sweep(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert "cannot resume" in err and "belongs to scenario 'a'" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_resume_refuses_another_grid_seed_runs_or_scenario(tmp_path, monkeypatch, capsys):
+    """A resume that would rewrite the rows of another sweep is refused with one line and
+    touches nothing; the same sweep resumes (nothing to run)."""
+    monkeypatch.setattr(sw, "default_run_function", lambda: fake_run)
+    out = tmp_path / "sweep"
+    base = ["sweep", "--backend", "serial", "--out", str(out), "--json"]
+    grid = ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "2", "--seed", "3"]
+    assert hopnav([*base, *grid]) == 0
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    other = resolve_scenario_path("b")
+    for change in (
+        ["--cs", "0.25", "--epss", "0.005", "--runs", "2", "--seed", "3"],  # grid
+        ["--cs", "0.25,0.75", "--epss", "0.005,0.0075", "--runs", "2", "--seed", "3"],
+        ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "2", "--seed", "4"],  # seed
+        ["--cs", "0.25,0.75", "--epss", "0.005", "--runs", "3", "--seed", "3"],  # runs
+        [*grid, "--scenario", str(other)],  # scenario
+    ):
+        assert hopnav([*base, *change, "--resume"]) == 2, change
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "cannot resume" in err, err
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert hopnav([*base, *grid, "--resume"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["rows"]) == 4
 
 
 def test_default_run_function_needs_the_runner(monkeypatch):

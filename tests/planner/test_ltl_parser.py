@@ -78,3 +78,53 @@ def test_propositions_and_check():
     assert check_propositions(f, ["Goal", "Haz", "Home", "A"]) is f
     with pytest.raises(UnknownPropositionError, match="'Home'"):
         check_propositions("G(!Haz) & F(Goal & F Home)", ["Goal", "Haz"])
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "(" * 101 + "a" + ")" * 101,
+        "!" * 101 + "a",
+        "X " * 101 + "a",
+        " U ".join(["a"] * 102),
+        " xor ".join(["a"] * 102),  # left-deep, built iteratively: the tree is too deep
+        "(" * 3000 + "a" + ")" * 3000,
+    ],
+)
+def test_nesting_beyond_the_limit_is_a_syntax_error(text):
+    with pytest.raises(LTLSyntaxError, match="nested deeper than 100") as info:
+        parse(text)
+    assert 0 <= info.value.position < len(text)
+
+
+def test_nesting_at_the_limit_parses_and_translates():
+    from planner.ltl.translate import translate
+
+    for text in ("(" * 99 + "a" + ")" * 99, "X " * 99 + "a", " U ".join(["a", "b"] * 49)):
+        f = parse(text)
+        assert f.depth <= 100
+        assert translate(f).n_states >= 2  # every later stage copes with that depth
+
+
+def test_chains_of_and_or_are_one_n_ary_node():
+    f = parse(" & ".join(["a", "b", "c", "d"]))
+    assert f.op == "&" and len(f.children) == 4 and f.depth == 1
+    assert parse("a & b | c & d") is s.lor(s.land(a, b), s.land(c, s.ap("d")))
+    assert parse(" | ".join(["a"] * 4000)).depth == 1  # long chains stay flat
+
+
+def test_token_limit():
+    with pytest.raises(LTLSyntaxError, match="longer than 10000 tokens"):
+        parse(" & ".join(["a"] * 6000))
+
+
+def test_names_are_plain_identifiers():
+    from planner.ltl.parser import is_plain_name
+
+    assert is_plain_name("Goal") and is_plain_name("_a1")
+    for bad in ("", "U", "GF", "XX", "true", "a.b", "a b", '"a"', "1a", "a\nb", "é"):
+        assert not is_plain_name(bad), bad
+    with pytest.raises(LTLSyntaxError, match=r"unexpected character '\.'"):
+        parse("a.b")
+    with pytest.raises(LTLSyntaxError, match="control character"):
+        parse('"a\nb" U c')

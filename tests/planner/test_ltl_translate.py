@@ -171,3 +171,24 @@ def test_simplify_is_equivalent(f):
         assert np.array_equal(
             evaluate(f, letters, start)[:, 0], evaluate(to_oracle(g), letters, start)[:, 0]
         )
+
+
+def test_translation_limits_fail_fast():
+    import time
+
+    from planner.errors import TranslationLimitError
+    from planner.ltl.budget import TranslationLimits
+
+    with pytest.raises(TranslationLimitError, match="2\\^17 letters"):
+        translate(" | ".join(f"p{i}" for i in range(17)))
+    t0 = time.perf_counter()
+    with pytest.raises(TranslationLimitError, match="entries"):
+        translate(" & ".join(f"F p{i}" for i in range(12)))  # 4096 states x 4096 letters
+    with pytest.raises(TranslationLimitError, match="more than 5 states"):
+        translate("G F a & G F b & F G c", limits=TranslationLimits(max_states=5))
+    hard = "".join("(a U " if i % 2 else "(b R " for i in range(20)) + "c" + ")" * 20
+    with pytest.raises(TranslationLimitError, match=r"longer than 0\.5 s"):
+        translate(hard, limits=TranslationLimits(max_seconds=0.5))
+    assert time.perf_counter() - t0 < 15
+    # the limits apply to one call only
+    assert translate("F p0 & F p1").n_states == 4

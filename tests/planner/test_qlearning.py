@@ -1,17 +1,21 @@
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
 
 from planner.errors import QTableError
 from planner.imdp import IMDP, DiscountedReward, Problem, Specification, ValueIteration, solve
 from planner.qlearning import (
+    SEAL_KIND,
     GreedyQ,
     QLearningSettings,
     RobustQLearner,
     greedy_action,
     robust_q_iteration,
 )
+from planner.sealed import seal
 
 
 def _tiny() -> IMDP:
@@ -141,8 +145,10 @@ def test_persistence_round_trip(tmp_path):
 
 
 def _write(path, **arrays):
-    with open(path, "wb") as f:
-        np.savez(f, **arrays)
+    """A sealed file (valid digest) holding ``arrays``."""
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    path.write_bytes(seal(SEAL_KIND, buf.getvalue()))
 
 
 def _valid_arrays():
@@ -200,6 +206,35 @@ def test_bad_inputs():
         RobustQLearner(3, 2, 3).update(_tiny(), 1, 1, 1, 0.0)
     with pytest.raises(QTableError, match="no allowed action"):
         learner.act(0, np.zeros(2, bool), np.random.default_rng(0))
+
+
+def test_every_single_bit_flip_is_detected(tmp_path):
+    """100 random bit flips anywhere in a saved Q-table are each a QTableError."""
+    learner = RobustQLearner(40, 8, 20, state_cell=np.arange(40) % 20)
+    learner.q[:] = np.random.default_rng(3).normal(size=(40, 8))
+    learner.observe_reward(3, 5.0)
+    path = tmp_path / "q.npz"
+    learner.save(path, metadata={"provenance": {"scenario": "c"}})
+    data = path.read_bytes()
+    rng = np.random.default_rng(20240519)
+    positions = rng.integers(0, len(data), size=100)
+    positions[:3] = (0, len(data) // 2, len(data) - 1)
+    for pos, bit in zip(positions, rng.integers(0, 8, size=100), strict=True):
+        flipped = bytearray(data)
+        flipped[pos] ^= 1 << int(bit)
+        path.write_bytes(bytes(flipped))
+        with pytest.raises(QTableError):
+            RobustQLearner.load(path)
+    path.write_bytes(data)
+    np.testing.assert_array_equal(RobustQLearner.load(path).q, learner.q)
+
+
+def test_a_table_without_digest_is_refused(tmp_path):
+    path = tmp_path / "old.npz"
+    with open(path, "wb") as f:
+        np.savez(f, **_valid_arrays())
+    with pytest.raises(QTableError, match="without a digest"):
+        RobustQLearner.load(path)
 
 
 def test_greedy_ties_go_to_the_preferred_action_else_to_the_generator():

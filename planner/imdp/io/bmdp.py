@@ -13,7 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.imdp.io._common import atomic_write, fail, lines, number
+from planner.imdp.io._common import (
+    MAX_ACTIONS,
+    MAX_ENTRIES,
+    MAX_STATES,
+    atomic_write,
+    check_count,
+    check_index,
+    fail,
+    lines,
+    number,
+)
 from planner.imdp.model import IMDP
 
 TERMINAL = "terminal"
@@ -44,40 +54,49 @@ def read_bmdp(path: str | os.PathLike[str]) -> IMDP:
     path = Path(path)
     it = lines(path)
     head = []
-    for what in ("number of states", "number of actions", "number of terminal states"):
+    limits = (MAX_STATES, MAX_ACTIONS, MAX_STATES)
+    no = 0
+    for what, limit in zip(
+        ("number of states", "number of actions", "number of terminal states"), limits, strict=True
+    ):
         try:
             no, text = next(it)
-            head.append(int(text))
         except StopIteration:
-            raise fail(path, len(head) + 1, f"missing the {what}") from None
+            raise fail(path, no + 1, f"missing the {what}") from None
+        try:
+            value = int(text)
         except ValueError:
             raise fail(path, no, f"expected the {what}, got {text!r}") from None
+        head.append(check_count(path, no, what, value, limit))
     n, n_act, n_term = head
     terminal = []
     for _ in range(n_term):
         try:
             no, text = next(it)
-            terminal.append(int(text))
         except StopIteration:
-            raise fail(path, 3 + len(terminal), "missing terminal states") from None
+            raise fail(path, no + 1, "missing terminal states") from None
+        try:
+            value = int(text)
         except ValueError:
             raise fail(path, no, f"expected a terminal state, got {text!r}") from None
+        terminal.append(check_index(path, no, "terminal state", value, n))
     s, a, t, lo, up = [], [], [], [], []
     for no, text in it:
         parts = text.split()
         if len(parts) != 5:
             raise fail(path, no, f"expected 's a t lo hi', got {text!r}")
         try:
-            s.append(int(parts[0]))
-            a.append(int(parts[1]))
-            t.append(int(parts[2]))
-            lo.append(float(parts[3]))
-            up.append(float(parts[4]))
+            ids = (int(parts[0]), int(parts[1]), int(parts[2]))
+            bounds = (float(parts[3]), float(parts[4]))
         except ValueError:
             raise fail(path, no, f"cannot read numbers in {text!r}") from None
-    bad = [x for x in terminal if not 0 <= x < n]
-    if bad:
-        raise fail(path, 4, f"terminal state {bad[0]} is not in [0, {n})")
+        s.append(check_index(path, no, "state", ids[0], n))
+        a.append(check_index(path, no, "action", ids[1], max(n_act, 1)))
+        t.append(check_index(path, no, "successor", ids[2], n))
+        lo.append(bounds[0])
+        up.append(bounds[1])
+        if len(s) > MAX_ENTRIES:
+            raise fail(path, no, f"more than {MAX_ENTRIES} transitions (the limit)")
     has = np.zeros(n, dtype=bool)
     src = np.asarray(s, dtype=np.int64)
     has[src[(src >= 0) & (src < n)]] = True

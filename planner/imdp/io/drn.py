@@ -13,7 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.imdp.io._common import atomic_write, fail, lines, number
+from planner.imdp.io._common import (
+    MAX_ACTIONS,
+    MAX_ENTRIES,
+    MAX_STATES,
+    atomic_write,
+    check_count,
+    check_index,
+    fail,
+    lines,
+    number,
+)
 from planner.imdp.model import IMDP
 
 _TRANSITION = re.compile(r"^(\d+)\s*:\s*(?:\[\s*([^,\]]+)\s*,\s*([^\]]+)\])?\s*([^\s\]]*)$")
@@ -62,7 +72,7 @@ def read_drn(path: str | os.PathLike[str], action_names: tuple[str, ...] | None 
         if text.startswith("//"):
             continue
         if text.startswith("@"):
-            section = text.split(":")[0].split()[0]
+            section = (text.split(":")[0].split() or ["@"])[0]
             if section == "@model":
                 if n_states is None:
                     raise fail(path, no, "@model before @nr_states")
@@ -82,6 +92,7 @@ def read_drn(path: str | os.PathLike[str], action_names: tuple[str, ...] | None 
                     n_states = int(text)
                 except ValueError:
                     raise fail(path, no, f"expected a state count, got {text!r}") from None
+                check_count(path, no, "states", n_states, MAX_STATES)
                 labels = [set() for _ in range(n_states)]
             continue
         words = text.split()
@@ -120,11 +131,17 @@ def read_drn(path: str | os.PathLike[str], action_names: tuple[str, ...] | None 
                 raise fail(path, no, f"cannot read the probability in {text!r}") from None
             s_list.append(state)
             a_names.append(action)
-            t_list.append(int(mt.group(1)))
+            t_list.append(check_index(path, no, "successor", int(mt.group(1)), n_states))
+            if len(s_list) > MAX_ENTRIES:
+                raise fail(path, no, f"more than {MAX_ENTRIES} transitions (the limit)")
     if n_states is None:
         raise fail(path, 1, "no @nr_states section")
     if action_names is None:
         action_names = tuple(dict.fromkeys(a_names))
+    if len(action_names) > MAX_ACTIONS:
+        raise fail(
+            path, 1, f"{len(action_names)} action names, more than the limit of {MAX_ACTIONS}"
+        )
     index = {n: i for i, n in enumerate(action_names)}
     unknown = [n for n in a_names if n not in index]
     if unknown:

@@ -15,7 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.imdp.io._common import atomic_write, fail, lines, number
+from planner.imdp.io._common import (
+    MAX_ACTIONS,
+    MAX_ENTRIES,
+    MAX_STATES,
+    atomic_write,
+    check_count,
+    check_index,
+    fail,
+    lines,
+    number,
+)
 from planner.imdp.model import IMDP
 
 _INTERVAL = re.compile(r"^\[\s*([^,\]]+)\s*,\s*([^\]]+)\s*\]$")
@@ -77,6 +87,8 @@ def read_prism(
         raise fail(
             tra_path, no, f"expected 'n_states n_choices n_transitions', got {head!r}"
         ) from None
+    check_count(tra_path, no, "states", n_states, MAX_STATES)
+    check_count(tra_path, no, "transitions", n_trans, MAX_ENTRIES)
     s, c, t, lo, up, names = [], [], [], [], [], []
     for no, text in it:
         parts = text.split()
@@ -87,9 +99,7 @@ def read_prism(
         if len(parts) not in (4, 5):
             raise fail(tra_path, no, f"expected 's c t [lo,hi] [action]', got {text!r}")
         try:
-            s.append(int(parts[0]))
-            c.append(int(parts[1]))
-            t.append(int(parts[2]))
+            ids = (int(parts[0]), int(parts[1]), int(parts[2]))
             m = _INTERVAL.match(parts[3])
             if m:
                 lo.append(float(m.group(1)))
@@ -100,7 +110,12 @@ def read_prism(
                 up.append(p)
         except ValueError:
             raise fail(tra_path, no, f"cannot read numbers in {text!r}") from None
+        s.append(check_index(tra_path, no, "state", ids[0], n_states))
+        c.append(check_index(tra_path, no, "choice", ids[1], MAX_ACTIONS))
+        t.append(check_index(tra_path, no, "successor", ids[2], n_states))
         names.append(parts[4] if len(parts) == 5 else None)
+        if len(s) > n_trans:
+            raise fail(tra_path, no, f"more transitions than the {n_trans} of the header")
     if len(s) != n_trans:
         raise fail(tra_path, 1, f"header announces {n_trans} transitions, file has {len(s)}")
     if any(n is not None for n in names):

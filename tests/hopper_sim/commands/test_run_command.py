@@ -54,3 +54,15 @@ def test_run_rejects_bad_scenario(tmp_path, capsys):
     bad.write_text("[world]\nsize = [5, 5]\n")
     assert main(["run", "--scenario", str(bad), "--no-rrd", "--no-png"]) == 2
     assert "bad.toml" in capsys.readouterr().err
+
+
+def test_a_product_beyond_the_limits_is_refused_before_the_first_hop(tmp_path, capsys, monkeypatch):
+    import planner.imdp.product as product
+
+    monkeypatch.setattr(product, "MAX_PRODUCT_ENTRIES", 1000)  # case (a): 226 x 3 states
+    rrd = tmp_path / "a.rrd"
+    code = main(["run", "--scenario", "a", "--rrd", str(rrd), "--no-png", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "scenario a: the product of 226 model states and 3 automaton states" in err
+    assert "more than the limit of 1000" in err and not rrd.exists()

@@ -140,3 +140,20 @@ def test_product_errors():
         ProductIMDP(m, trivial_automaton(), reward=np.zeros(3))
     with pytest.raises(ProductError, match="no candidate"):
         ProductIMDP(m, trivial_automaton()).choose_mec([])
+
+
+def test_a_product_beyond_the_size_limits_is_refused_before_it_is_built(monkeypatch):
+    import planner.imdp.product as product
+
+    model = IMDP(2, [0, 0, 1], [0, 0, 0], [0, 1, 1], [0.4, 0.4, 1], [0.6, 0.6, 1])
+    aut = RabinAutomaton((), np.zeros((3, 1), dtype=np.int64), 0, [({0}, set())])
+    ProductIMDP(model, aut)  # 6 states, 9 transitions
+    monkeypatch.setattr(product, "MAX_PRODUCT_STATES", 5)
+    with pytest.raises(ProductError, match="6 states, more than the limit of 5"):
+        ProductIMDP(model, aut)
+    monkeypatch.setattr(product, "MAX_PRODUCT_STATES", 6)
+    monkeypatch.setattr(product, "MAX_PRODUCT_ENTRIES", 8)
+    with pytest.raises(ProductError, match="9 transitions, more than the limit of 8"):
+        ProductIMDP(model, aut)
+    monkeypatch.setattr(product, "MAX_PRODUCT_ENTRIES", 9)
+    assert ProductIMDP(model, aut).model.n_states == 6
