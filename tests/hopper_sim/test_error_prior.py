@@ -47,7 +47,11 @@ def test_prior_is_built_from_the_scene(env):
 def test_a_short_calibration_agrees_with_the_shipped_one(env):
     short = ep.calibrate(env.model, env.controller, states=6, seed=3)
     shipped = ep.load_calibration(env.model, env.controller)
-    assert short.sensitivity == pytest.approx(shipped.sensitivity, rel=1e-6)  # steady gait
+    # the largest sensitivity over 6 chain states (and the steady gait) against 150 states
+    assert short.sensitivity == pytest.approx(shipped.sensitivity, rel=0.1)
+    assert short.sensitivity <= shipped.sensitivity * 1.1
+    table = np.array(short.sensitivity_table)
+    assert table.shape == (8, 2) and (table > 0).all() and table.max() <= short.sensitivity
     assert np.abs(np.array(short.bias) - np.array(shipped.bias)).max() < 0.1
     again = ep.calibrate(env.model, env.controller, states=6, seed=3)
     assert again == short  # the same seed gives the same calibration

@@ -264,13 +264,13 @@ def test_example_user_scenario_loads():
 
     root = Path(__file__).resolve().parents[2]
     s = load_scenario(root / "examples" / "scenarios" / "corridor.toml")
-    assert (s.world.nx, s.world.ny, s.world.cell) == (24, 12, 0.5)
+    assert (s.world.nx, s.world.ny, s.world.cell) == (16, 8, 1.0)
     assert set(s.labels) == {"Goal", "Haz", "charger", "coin"}
     assert s.reward_grid.sum() == pytest.approx(9.0)
     text = ascii_map(s)
     assert "c charger" in text and "o coin" in text
-    rows = text.splitlines()[:12]
-    assert rows[12 - 1 - 8][12] == "c" and rows[12 - 1 - 9][16] == "o"
+    rows = text.splitlines()[:8]  # top row first: row 8 - 1 - j holds cells (., j)
+    assert rows[8 - 1 - 5][11] == "c" and rows[8 - 1 - 2][3] == "o"
 
 
 def test_collect_setting():
