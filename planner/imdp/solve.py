@@ -585,7 +585,9 @@ def _interval_iteration(
     else the best rows), the lower bound raised to the best exit on the traversable end
     components, a Gauss-Seidel pass ``U = min(U, T(U))`` from above (all rows) and ``U``
     lowered to the best exit on every end component. From ``U = 1`` both sides stay sound
-    bounds in every round.
+    bounds in every round. Every ``_II_WINDOW`` rounds the states still moving from below,
+    if at most ``_LOCAL_FRACTION`` of the free states, are solved by strategy iteration
+    with the others held at ``L`` (sound, as in :func:`_reach_sweeps`).
 
     When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a
     long time among states of nearly equal value: ``U`` creeps down at the rate of the
@@ -615,6 +617,7 @@ def _interval_iteration(
     it = passes = evaluations = repairs = stalls = 0
     checkpoint = np.inf
     tol = alg.tolerance
+    before = v.copy()
     while it < alg.max_iterations:
         it += 1
         residual = sweeper.sweep(v, it % _FULL_EVERY == 1)
@@ -632,6 +635,17 @@ def _interval_iteration(
             return v, u, residual, it, passes, True, evaluations
         if it % _II_WINDOW:
             continue
+        if alg.strategy_iteration:
+            # the states still moving from below, by strategy iteration with the others
+            # held at their lower bounds (sound; as in ``_reach_sweeps``)
+            moving = v - before >= tol
+            if 0 < moving.sum() <= _LOCAL_FRACTION * st.size:
+                rows = np.sort(sweeper.rows[moving[m.row_state[sweeper.rows]]])
+                x, _, k = _strategy_iteration(m, rows, v, np.where(moving, 0.0, v), True, tol)
+                evaluations += k
+                if x is not None:
+                    v = np.maximum(v, x)
+            before = v.copy()
         if width <= 0.5 * checkpoint:
             checkpoint = width
             continue
