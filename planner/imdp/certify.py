@@ -22,20 +22,29 @@ sparse solves) and checks again: at the least fixed point ``V*`` itself,
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
-from planner.imdp.kernels import ReachSweeper
+from planner.imdp.graph import end_component_labels
+from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
+from planner.imdp.model import IMDP
+from planner.imdp.ordering import row_entries
 
 OVI_PASSES = 8
 """Checking passes per optimistic candidate."""
 
 
-def check_upper(sweeper: ReachSweeper, u: np.ndarray, passes: int) -> tuple[bool, int]:
+def check_upper(
+    sweeper: ReachSweeper, u: np.ndarray, passes: int, raise_violations: bool = False
+) -> tuple[bool, int]:
     """Up to ``passes`` checking passes on ``u`` in place; ``(certified, passes used)``.
-    Stops early once the number of violations no longer decreases over two passes."""
+    Stops early once the number of violations no longer decreases over two passes.
+    ``raise_violations``: a violating state takes its Bellman value (a repair of the
+    candidate; only a later pass without violations certifies it)."""
     last = None
     stalled = 0
     for k in range(1, passes + 1):
-        _, bad = sweeper.upper_pass(u)
+        _, bad = sweeper.upper_pass(u, raise_violations)
         if bad == 0:
             return True, k
         stalled = stalled + 1 if last is not None and bad >= last else 0
@@ -54,3 +63,97 @@ def optimistic_candidate(
     u[st] = np.minimum(1.0, lower[st] + delta)
     ok, passes = check_upper(sweeper, u, OVI_PASSES)
     return (u if ok else None), passes
+
+
+class EndComponentBounds:
+    """Bounds from the maximal end components of the free states, for maximal reachability
+    against a minimising adversary (interval iteration with end-component deflation:
+    Haddad and Monmege 2018; Eisentraut et al. 2018 for games).
+
+    Components: the pessimistic maximal end components of the free rows (a row *stays* in
+    ``C`` when every ``upper > 0`` successor lies in ``C``; targets and settled states lie
+    in none). An *exit* of ``C`` is a row of a member state that does not stay.
+
+    **Upper bound** (:meth:`deflate`; sound for *every* set ``C`` of free non-target
+    states): ``V*(s) <= E_C(V*) = max`` over the exits ``r`` of ``C`` of ``T_r(V*)`` (0
+    without exits). Proof: let ``W = max_C V* > E_C``, ``S`` the states of ``C`` at ``W``.
+    A row of ``s`` in ``S`` attaining ``W`` stays (exits give at most ``E_C``) and, all
+    successor values being at most ``W``, every feasible distribution of it lies in ``S``.
+    Lowering ``V*`` on ``S`` by ``W - E'`` (``E' < W`` the largest value of the rows of
+    ``S`` that are not closed in ``S``, and of ``E_C``) gives a vector ``U'`` with
+    ``T(U') <= U'``; by Knaster-Tarski the least fixed point ``V*`` is at most ``U' <
+    V*`` on ``S``: a contradiction. ``T`` and ``E_C`` are monotone, so from ``U >= V*``
+    both ``min(U, T(U))`` and ``min(U, E_C(U))`` stay upper bounds: no certificate pass
+    is needed.
+
+    **Lower bound** (:meth:`collapse`, only on *traversable* components: strongly
+    connected through the ``lower > 0`` entries of their staying rows): from every state
+    of such a component the strategy can reach every other one almost surely without
+    leaving it, whatever the adversary does (playing the staying rows uniformly, each
+    forced edge is taken with probability at least ``lower / rows``), so ``V*(s) >=
+    T_r(V*)`` for every exit ``r`` of the component, and from ``L <= V*``,
+    ``max(L, E_C(L)) <= V*``.
+    """
+
+    def __init__(self, model: IMDP, sweeper: ReachSweeper, free: np.ndarray) -> None:
+        m = model
+        self.sweeper = sweeper
+        row_mask = np.zeros(m.n_rows, dtype=bool)
+        row_mask[sweeper.rows] = True
+        comp, kept = end_component_labels(m, row_mask, free, "pessimistic")
+        members = np.flatnonzero(comp >= 0)
+        labels, label_of = np.unique(comp[members], return_inverse=True)
+        n_comp = labels.size
+        self.n_components = int(n_comp)
+        dense = np.full(m.n_states, -1, dtype=np.int64)
+        dense[members] = label_of
+        order, self._member_ptr = counting_order(label_of.astype(np.int64), n_comp)
+        self._members = members[order].astype(np.int64)
+        row_comp = dense[m.row_state[sweeper.rows]]
+        exits = np.flatnonzero((row_comp >= 0) & ~kept[sweeper.rows])
+        order, self._exit_ptr = counting_order(row_comp[exits], n_comp)
+        self._exit_rows = exits[order].astype(np.int64)
+        self._all = np.arange(n_comp, dtype=np.int64)
+        # traversable: one strongly connected component of the forced (lower > 0) entries
+        # of the staying rows
+        kept_rows = np.flatnonzero(kept)
+        ent = row_entries(m, kept_rows)
+        forced = m.lower[ent] > 0.0
+        src = np.repeat(m.row_state[kept_rows], m.row_ptr[kept_rows + 1] - m.row_ptr[kept_rows])
+        graph = sp.csr_matrix(
+            (np.ones(int(forced.sum()), dtype=np.int8), (src[forced], m.successor[ent][forced])),
+            shape=(m.n_states, m.n_states),
+        )
+        _, scc = connected_components(graph, directed=True, connection="strong")
+        pairs = np.unique(np.stack([label_of, scc[members]]), axis=1)
+        per_comp = np.bincount(pairs[0], minlength=n_comp)
+        self._traversable = np.flatnonzero(per_comp == 1).astype(np.int64)
+
+    def _apply(self, v: np.ndarray, comps: np.ndarray, crit: np.ndarray, raise_values: bool):
+        sw = self.sweeper
+        if comps.size:
+            component_exit_bound(
+                self._exit_rows,
+                self._exit_ptr,
+                self._members,
+                self._member_ptr,
+                comps,
+                sw.row_ptr,
+                sw.remaining,
+                sw.succ,
+                sw.lower,
+                sw.gap,
+                crit,
+                v,
+                sw.adversary_minimizes,
+                raise_values,
+            )
+
+    def deflate(self, u: np.ndarray) -> None:
+        """``u = min(u, E_C(u))`` on every component, in place (an upper bound stays one)."""
+        self._apply(u, self._all, self.sweeper.crit_up, False)
+
+    def collapse(self, v: np.ndarray) -> None:
+        """``v = max(v, E_C(v))`` on the traversable components, in place (a lower bound
+        stays one)."""
+        self._apply(v, self._traversable, self.sweeper.crit, True)

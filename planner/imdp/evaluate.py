@@ -110,6 +110,7 @@ def strategy_reach_value(
     adversary_minimizes: bool,
     start: np.ndarray,
     max_rounds: int = 50,
+    sound: bool = True,
 ) -> np.ndarray | None:
     """``V_sigma`` of the strategy that plays ``rows`` (one row per free state, sorted),
     lowered by the error bound of its computation (the solve's residual and the order
@@ -124,6 +125,9 @@ def strategy_reach_value(
         adversary_minimizes: the adversary's side (see the module docstring).
         start: values that seed the adversary's order.
         max_rounds: adversary improvement rounds before giving up.
+        sound: lower the values by the error bound (default). ``False``: the computed
+            values as they are, a *candidate* only (e.g. for an upper bound that is then
+            checked), not a bound.
 
     Returns:
         ``(n_states,)`` values, or ``None`` when the adversary did not settle within
@@ -135,7 +139,7 @@ def strategy_reach_value(
     if not adversary_minimizes:
         adv = OrderingAdversary(model, False, rows=rows)
         x, steps, resid = chain_reach(adv.matrix(start), states, fixed_val, error=True)
-        return _lowered(x, states, steps * (resid + _EPS))
+        return _lowered(x, states, steps * (resid + _EPS) if sound else 0.0)
     row_mask = np.zeros(model.n_rows, dtype=bool)
     row_mask[rows] = True
     target = fixed_val > 0
@@ -159,7 +163,8 @@ def strategy_reach_value(
             # x, like the solve's residual, costs at most ``steps`` times itself
             exact = OrderingAdversary(model, True, rows=rows).expectation(x)
             defect = float(np.max(matrix @ x - exact, initial=0.0))
-            return _lowered(x, states, steps * (resid + max(defect, 0.0) + _EPS))
+            margin = steps * (resid + max(defect, 0.0) + _EPS)
+            return _lowered(x, states, margin if sound else 0.0)
     return None
 
 

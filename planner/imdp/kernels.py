@@ -190,10 +190,13 @@ def upper_sweep(
     u,
     maximize,
     adversary_minimizes,
+    raise_violations,
 ):
     """One Gauss-Seidel pass of ``U(s) <- T(U)(s)`` from above, in place, that only ever
     lowers ``U``: a state whose Bellman value exceeds ``U(s)`` keeps ``U(s)`` and counts as
-    a violation. Returns ``(max decrease, violations)``.
+    a violation (``raise_violations``: it takes the Bellman value, still counting as a
+    violation; the pass is then a candidate's repair, not a bound). Returns
+    ``(max decrease, violations)``.
 
     A value above ``U(s)`` by at most ``_ROUNDING`` (1e-15, floating-point noise of the
     row sums) keeps ``U(s)`` without counting.
@@ -233,6 +236,8 @@ def upper_sweep(
                 decrease = old - best
         elif best > old + _ROUNDING:
             violations += 1
+            if raise_violations:
+                u[s] = best
     return decrease, violations
 
 
@@ -290,6 +295,8 @@ class ReachSweeper:
         order = np.lexsort((free_rows, sweep_key[rs]))
         self._position = order
         rows = free_rows[order]
+        self.rows = rows
+        """The model row of every row of the layout."""
         rs = rs[order]
         first = first_of_runs(rs)
         self.states = rs[first].astype(np.int64)
@@ -361,7 +368,7 @@ class ReachSweeper:
             )
         )
 
-    def upper_pass(self, u: np.ndarray) -> tuple[float, int]:
+    def upper_pass(self, u: np.ndarray, raise_violations: bool = False) -> tuple[float, int]:
         """One pass of :func:`upper_sweep` on ``u`` in place (all rows):
         ``(max decrease, violations)``."""
         dec, bad = upper_sweep(
@@ -376,6 +383,7 @@ class ReachSweeper:
             u,
             self.maximize,
             self.adversary_minimizes,
+            raise_violations,
         )
         return float(dec), int(bad)
 
@@ -880,3 +888,56 @@ def prune_kernel(
                     queue[tail] = s
                     tail += 1
     return bad, rows
+
+
+@numba.njit(cache=True, nogil=True)
+def component_exit_bound(
+    exit_rows,
+    exit_ptr,
+    members,
+    member_ptr,
+    comps,
+    row_ptr,
+    remaining,
+    succ,
+    lower,
+    gap,
+    crit,
+    v,
+    adversary_minimizes,
+    raise_values,
+) -> None:
+    """Per end component ``c`` of ``comps``: ``E_c = max`` of the adversary's expectation
+    of ``v`` over its exit rows ``exit_rows[exit_ptr[c]:exit_ptr[c + 1]]`` (0 without
+    exits), then ``v[s] = max(v[s], E_c)`` (``raise_values``) or ``min(v[s], E_c)`` for its
+    members ``members[member_ptr[c]:member_ptr[c + 1]]``, in place (see
+    :mod:`planner.imdp.certify` for when each is sound)."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    idx, keys = _scratch(row_ptr)
+    for c in comps:
+        best = 0.0
+        for k in range(exit_ptr[c], exit_ptr[c + 1]):
+            r = exit_rows[k]
+            q = _row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                v,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if q > best:
+                best = q
+        for k in range(member_ptr[c], member_ptr[c + 1]):
+            s = members[k]
+            if raise_values:
+                if best > v[s]:
+                    v[s] = best
+            elif best < v[s]:
+                v[s] = best

@@ -492,6 +492,13 @@ def _reach_sweeps(
     upper_sweeps = 0
     tries = 0
     exacted = False
+    if alg.certified and maximize and adversary_minimizes:
+        v, upper, residual, it, upper_sweeps, done, evaluations = _interval_iteration(
+            m, sweeper, v, alg
+        )
+        if done:
+            q = sweeper.row_values(v)
+            return v, upper, residual, it, None, evaluations, q, upper_sweeps
     while it < alg.max_iterations:
         it += 1
         check = it > next_eval
@@ -568,6 +575,128 @@ def _reach_sweeps(
     return v, upper, residual, it, sigma, evaluations, sweeper.row_values(v), upper_sweeps
 
 
+def _interval_iteration(
+    m: IMDP, sweeper: ReachSweeper, v: np.ndarray, alg: ValueIteration
+) -> tuple[np.ndarray, np.ndarray, float, int, int, bool, int]:
+    """Interval iteration with end-component bounds, for maximal reachability against a
+    minimising adversary (:class:`planner.imdp.certify.EndComponentBounds`).
+
+    Each round: a Gauss-Seidel sweep from below (all rows every ``_FULL_EVERY``-th round,
+    else the best rows), the lower bound raised to the best exit on the traversable end
+    components, a Gauss-Seidel pass ``U = min(U, T(U))`` from above (all rows) and ``U``
+    lowered to the best exit on every end component. From ``U = 1`` both sides stay sound
+    bounds in every round. Every ``_II_WINDOW`` rounds the states still moving from below,
+    if at most ``_LOCAL_FRACTION`` of the free states, are solved by strategy iteration
+    with the others held at ``L`` (sound, as in :func:`_reach_sweeps`).
+
+    When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a
+    long time among states of nearly equal value: ``U`` creeps down at the rate of the
+    circulation's leak), the states ``B`` still wider than ``tolerance / 2`` are solved by
+    strategy iteration with the others held (when they are at most ``_LOCAL_FRACTION`` of
+    the free states; ``_II_STALLS`` stalls with more end it): from below with ``L``
+    outside (a sound lower bound), and from above with ``U`` outside, *unlowered*: ``Y``.
+    The candidate ``U`` with
+    ``min(U, max(Y, L) + tolerance / 4)`` on ``B`` is kept only if checking passes certify
+    it superharmonic (:func:`planner.imdp.certify.check_upper`, violating states raised to
+    their Bellman value until a pass finds none; then it bounds ``V*`` by Knaster-Tarski,
+    however inexact ``Y`` was). At most ``_II_REPAIRS`` such repairs, none without
+    ``strategy_iteration``.
+
+    Returns ``(lower, upper, residual, sweeps, upper_passes, done, evaluations)``:
+    ``done`` when ``max(U - L) < tolerance``, else the caller continues from ``L`` and
+    ``U`` with its other means.
+    """
+    st = sweeper.states
+    free = np.zeros(m.n_states, dtype=bool)
+    free[st] = True
+    bounds = certify.EndComponentBounds(m, sweeper, free)
+    u = v.copy()
+    u[st] = 1.0
+    bounds.deflate(u)
+    residual = np.inf
+    it = passes = evaluations = repairs = stalls = 0
+    checkpoint = np.inf
+    tol = alg.tolerance
+    before = v.copy()
+    while it < alg.max_iterations:
+        it += 1
+        residual = sweeper.sweep(v, it % _FULL_EVERY == 1)
+        if alg.callback is not None:
+            alg.callback(it, residual)
+        bounds.collapse(v)
+        sweeper.upper_pass(u)
+        passes += 1
+        bounds.deflate(u)
+        width = float(np.max(u[st] - v[st]))
+        if width < tol:
+            # a last full sweep: its change is at most the width (L <= T(L) <= V* <= U)
+            it += 1
+            residual = sweeper.sweep(v, True)
+            return v, u, residual, it, passes, True, evaluations
+        if it % _II_WINDOW:
+            continue
+        if alg.strategy_iteration:
+            # the states still moving from below, by strategy iteration with the others
+            # held at their lower bounds (sound; as in ``_reach_sweeps``)
+            moving = v - before >= tol
+            if 0 < moving.sum() <= _LOCAL_FRACTION * st.size:
+                rows = np.sort(sweeper.rows[moving[m.row_state[sweeper.rows]]])
+                x, _, k = _strategy_iteration(m, rows, v, np.where(moving, 0.0, v), True, tol)
+                evaluations += k
+                if x is not None:
+                    v = np.maximum(v, x)
+            before = v.copy()
+        if width <= 0.5 * checkpoint:
+            checkpoint = width
+            continue
+        wide = np.zeros(m.n_states, dtype=bool)
+        wide[st[u[st] - v[st] >= tol / 2]] = True
+        if not alg.strategy_iteration or repairs >= _II_REPAIRS or stalls >= _II_STALLS:
+            break
+        if wide.sum() > _LOCAL_FRACTION * st.size:
+            # too many states for a cheap repair: keep iterating for a while
+            stalls += 1
+            checkpoint = width
+            continue
+        repairs += 1
+        rows = np.sort(sweeper.rows[wide[m.row_state[sweeper.rows]]])
+        x, _, k = _strategy_iteration(m, rows, v, np.where(wide, 0.0, v), True, _CANDIDATE_SLACK)
+        evaluations += k
+        if x is not None:
+            v = np.maximum(v, x)
+        # switching slack ~1e-15: a row left better than Y by more than tolerance / 4 times
+        # its mass leaving B would fail the check
+        y, _, k = _strategy_iteration(
+            m, rows, u, np.where(wide, 0.0, u), True, _CANDIDATE_SLACK, sound=False
+        )
+        evaluations += k
+        if y is not None:
+            cand = u.copy()
+            cand[wide] = np.minimum(u[wide], np.maximum(y[wide], v[wide]) + tol / 4)
+            ok, k = certify.check_upper(sweeper, cand, _REPAIR_PASSES, raise_violations=True)
+            passes += k
+            if ok:
+                u = np.minimum(u, cand)
+        checkpoint = float(np.max(u[st] - v[st]))
+    return v, u, residual, it, passes, False, evaluations
+
+
+_II_WINDOW = 16
+"""Rounds of interval iteration over which the bracket must at least halve."""
+
+_II_REPAIRS = 3
+"""Strategy-iteration repairs of a stalled interval iteration."""
+
+_REPAIR_PASSES = 16
+"""Checking passes of a repaired upper candidate (violating states raised)."""
+
+_II_STALLS = 4
+"""Stalled windows with too many wide states before interval iteration gives up."""
+
+_CANDIDATE_SLACK = 1e-13
+"""The ``tol`` given to the strategy iteration of an upper candidate (switching slack
+``tol / 100``)."""
+
 _OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
 
@@ -631,6 +760,7 @@ def _strategy_iteration(
     adversary_minimizes: bool,
     tol: float,
     max_rounds: int | None = None,
+    sound: bool = True,
 ) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Robust strategy iteration for maximal reachability, started from the strategy
     greedy for ``v``.
@@ -649,6 +779,8 @@ def _strategy_iteration(
     fixed point: it *is* the least fixed point. With a cooperating adversary each round
     evaluates the chain of ``sigma`` and the adversary greedy for the last values (a
     lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
+    ``sound=False``: the evaluations are not lowered by their rounding bound (the values
+    are then a candidate, not a lower bound; see :func:`strategy_reach_value`).
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
@@ -662,7 +794,7 @@ def _strategy_iteration(
     limit = _MAX_IMPROVEMENTS if max_rounds is None else max_rounds
     for rounds in range(1, limit + 1):
         start = v if best is None else best
-        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start)
+        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
         if x is None:
             return best, None, rounds
         best = x if best is None else np.maximum(best, x)

@@ -1,0 +1,86 @@
+import importlib
+
+import numpy as np
+import pytest
+
+from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteration, solve
+from planner.imdp.certify import EndComponentBounds
+from planner.imdp.kernels import ReachSweeper
+from tests.planner.imdp.reference import random_imdp, ref_reach
+
+solve_module = importlib.import_module("planner.imdp.solve")
+
+
+def loop_with_exit() -> IMDP:
+    """States 0 and 1 can circulate forever (every successor inside); state 1's second
+    action exits to the goal (2) with [0.3, 0.6] and to a sink (3) with [0.4, 0.7]. The
+    worst-case value of both is 0.3, and the upper bound from 1 stays at 1 without the
+    end-component bound."""
+    s = [0, 0, 1, 1, 1, 1, 2, 3]
+    a = [0, 0, 0, 0, 1, 1, 0, 0]
+    t = [0, 1, 0, 1, 2, 3, 2, 3]
+    lo = [0.0, 0.5, 0.6, 0.0, 0.3, 0.4, 1.0, 1.0]
+    up = [0.5, 1.0, 1.0, 0.4, 0.6, 0.7, 1.0, 1.0]
+    return IMDP(4, s, a, t, lo, up, labels=[(), (), ("goal",), ()])
+
+
+def test_end_component_bound_closes_the_bracket_without_strategy_iteration(monkeypatch):
+    def no_si(*args, **kwargs):
+        raise AssertionError("strategy iteration was not expected")
+
+    monkeypatch.setattr(solve_module, "_strategy_iteration", no_si)
+    sol = solve(Problem(loop_with_exit(), Specification(ReachAvoid("goal"))))
+    assert sol.converged and sol.error < 1e-8
+    assert np.all(sol.lower[:2] <= 0.3 + 1e-15) and np.all(sol.upper[:2] >= 0.3 - 1e-15)
+    assert sol.strategy[1] == 1
+
+
+def bounds_for(m: IMDP, free: np.ndarray) -> EndComponentBounds:
+    free_rows = np.flatnonzero(free[m.row_state])
+    sweeper = ReachSweeper(m, free_rows, np.zeros(m.n_states), True, True)
+    return EndComponentBounds(m, sweeper, free)
+
+
+def test_loop_with_exit_is_one_traversable_component():
+    m = loop_with_exit()
+    b = bounds_for(m, np.array([True, True, False, False]))
+    assert b.n_components == 1 and b._traversable.size == 1
+    v = np.array([0.0, 0.0, 1.0, 0.0])
+    b.collapse(v)
+    assert v[:2] == pytest.approx([0.3, 0.3])
+    u = np.array([1.0, 1.0, 1.0, 0.0])
+    b.deflate(u)
+    assert u[:2] == pytest.approx([0.3, 0.3])  # the exit: 0.7 to the sink, 0.3 to the goal
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_end_component_bounds_are_sound_at_the_value(zero_lower):
+    # E_C(V*) >= V* on every component; <= V* on the traversable ones
+    rng = np.random.default_rng(7 if zero_lower else 8)
+    seen = traversable = 0
+    for _ in range(30):
+        m = random_imdp(rng, n_states=15, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad") & ~m.states_labelled("goal")
+        ref = ref_reach(m, tgt, avd, pessimistic=True, maximize=True)
+        b = bounds_for(m, ~(tgt | avd))
+        seen += b.n_components
+        traversable += b._traversable.size
+        u = ref.copy()
+        b.deflate(u)
+        assert np.all(u >= ref - 1e-9)
+        v = ref.copy()
+        b.collapse(v)
+        assert np.all(v <= ref + 1e-9)
+    assert seen > 0 and traversable > 0
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_certified_bracket_with_end_components_contains_reference(zero_lower):
+    rng = np.random.default_rng(11 if zero_lower else 12)
+    for _ in range(10):
+        m = random_imdp(rng, n_states=15, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad") & ~m.states_labelled("goal")
+        sol = solve(Problem(m, Specification(ReachAvoid(tgt, avd))), ValueIteration())
+        ref = ref_reach(m, tgt, avd, pessimistic=True, maximize=True)
+        assert sol.converged and sol.error < 1e-8
+        assert np.all(sol.lower <= ref + 1e-10) and np.all(ref <= sol.upper + 1e-12)
