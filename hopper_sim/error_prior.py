@@ -109,25 +109,43 @@ def controller_hash(controller: LegAngleController) -> str:
     return h.hexdigest()
 
 
+def _sensitivities(
+    model: HopperModel,
+    controller: LegAngleController,
+    vel: np.ndarray,
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    force: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``|d landing_d / d F_d|`` [m/N], ``(S, A, 2)``, of the hops with touchdown angles
+    ``alpha``, ``beta`` ``(S, A)`` from departure velocities ``vel`` ``(S, 3)`` (central
+    differences under a uniform stance force of ``+-force`` newtons along each axis), and
+    ``(S, A)`` whether all four hops of an entry succeeded."""
+    n_states, n_act = alpha.shape
+    energy = nominal_energy(model, controller.steady.speed)
+    land = []
+    ok = np.ones((n_states, n_act), dtype=bool)
+    for f in ((force, 0.0), (-force, 0.0), (0.0, force), (0.0, -force)):
+        res = simulate_hops(
+            model, np.repeat(vel, n_act, 0), alpha.ravel(), beta.ravel(),
+            terrain=_Uniform(f), thrust=True, nominal_energy=energy,
+        )  # fmt: skip
+        ok &= res.ok.reshape(n_states, n_act)
+        land.append(res.next_pos.reshape(n_states, n_act, 2))
+    jx = np.abs(land[0][..., 0] - land[1][..., 0]) / (2.0 * force)
+    jy = np.abs(land[2][..., 1] - land[3][..., 1]) / (2.0 * force)
+    return np.stack([jx, jy], axis=-1), ok
+
+
 def _max_sensitivity(
     model: HopperModel, controller: LegAngleController, force: float, cell: float
 ) -> float:
     steady = controller.steady.velocity
     sol, _, _ = controller.solve_all(np.zeros(2), steady, ACTION_OFFSETS * cell)
-    n = len(ACTION_OFFSETS)
-    energy = nominal_energy(model, controller.steady.speed)
-    land = []
-    for f in ((force, 0.0), (-force, 0.0), (0.0, force), (0.0, -force)):
-        res = simulate_hops(
-            model, np.repeat(steady[None], n, 0), sol.alpha, sol.beta,
-            terrain=_Uniform(f), thrust=True, nominal_energy=energy,
-        )  # fmt: skip
-        if not res.ok.all():
-            raise RuntimeError(f"calibration: a hop from the steady gait failed under {f} N")
-        land.append(res.next_pos)
-    jx = (land[0][:, 0] - land[1][:, 0]) / (2.0 * force)
-    jy = (land[2][:, 1] - land[3][:, 1]) / (2.0 * force)
-    return float(max(np.abs(jx).max(), np.abs(jy).max()))
+    j, ok = _sensitivities(model, controller, steady[None], sol.alpha[None], sol.beta[None], force)
+    if not ok.all():
+        raise RuntimeError(f"calibration: a hop from the steady gait failed under +-{force} N")
+    return float(j.max())
 
 
 def _sensitivity_table(
@@ -140,22 +158,10 @@ def _sensitivity_table(
     force: float,
 ) -> np.ndarray:
     """``(n_actions, 2)`` [m/N]: per action and axis the largest ``|d landing_d / d F_d|``
-    over the chain states where the action is executed as requested (central differences
-    under a uniform stance force of ``+-force`` newtons along each axis)."""
-    n_states, n_act = alpha.shape
-    energy = nominal_energy(model, controller.steady.speed)
-    land = []
-    for f in ((force, 0.0), (-force, 0.0), (0.0, force), (0.0, -force)):
-        res = simulate_hops(
-            model, np.repeat(vel, n_act, 0), alpha.ravel(), beta.ravel(),
-            terrain=_Uniform(f), thrust=True, nominal_energy=energy,
-        )  # fmt: skip
-        ok = ok & res.ok.reshape(n_states, n_act)
-        land.append(res.next_pos.reshape(n_states, n_act, 2))
-    jx = np.abs(land[0][..., 0] - land[1][..., 0]) / (2.0 * force)
-    jy = np.abs(land[2][..., 1] - land[3][..., 1]) / (2.0 * force)
-    j = np.stack([jx, jy], axis=-1)
-    j[~ok] = 0.0
+    over the chain states where the action is executed as requested (``ok``) and its four
+    hops succeed (:func:`_sensitivities`)."""
+    j, hopped = _sensitivities(model, controller, vel, alpha, beta, force)
+    j[~(ok & hopped)] = 0.0
     return j.max(axis=0)
 
 

@@ -8,7 +8,7 @@ Units: positions and errors in metres. Actions are indices ``0 .. A-1`` (``N1 ..
 and executes action ``a``::
 
     error_d = e_d(x, a) + nu_d + r_d
-    e_d(x, a) = c_{a,d} + u_{a,d} (o_d + f_d(x)) + (1 - u_{a,d}) o_{a,d} + g_{a,d}(x)
+    e_d(x, a) = c_{a,d} + s_{a,d} [u_{a,d} (o_d + f_d(x)) + (1 - u_{a,d}) o_{a,d} + g_{a,d}(x)]
 
 * ``c_{a,d} ~ N(bias_mean[a, d], bias_std^2)``: a constant per action (the controller's bias:
   measured undershoots of 0.07 m for one-cell and 0.18-0.2 m for two-cell hops; for MuJoCo
@@ -23,16 +23,18 @@ and executes action ``a``::
 * ``g_{a,d} ~ GP(0, (1 - rho u_{a,d}) field_std^2 k)``, independent per action: the part
   peculiar to the action (``rho = field_correlation``); an uncoupled action's position-
   dependent error is its own field alone;
+* ``s_{a,d}`` (``scale``, in ``(0, 1]``, default 1): how strongly the terrain enters action
+  ``a`` on axis ``d``, its sensitivity to a stance force relative to the largest one;
 * ``nu_d``: the known landing noise (``noise``, truncated Gaussian), independent per hop;
 * ``r_d ~ N(0, s_{a,d}^2)``: the residual, independent per hop (the error's dependence on the
   incoming velocity and on the position inside the cell, which the abstraction's state does
   not hold). ``s_{a,d}`` is estimated per action and axis (below).
 
-So every action's position-dependent part has std ``field_std`` and length scale
+So every action's position-dependent part has std ``s_{a,d} field_std`` and length scale
 ``lengthscale``, two coupled actions' parts at the same point correlate with ``rho``, and the
-covariance of two hops' mean errors is
-``field_std^2 (rho u_a u_a' + (1 - rho u_a) [a = a']) k(x, x') + bias_std^2 [a = a'] +
-offset_std^2 (u_a u_a' + (1 - u_a) [a = a'])``; the
+covariance of two hops' mean errors is (``w_a = s_a u_a``)
+``w_a w_a' (rho field_std^2 k(x, x') + offset_std^2) + [a = a'] (s_a^2 (1 - rho u_a)
+field_std^2 k(x, x') + s_a^2 (1 - u_a) offset_std^2 + bias_std^2)``; the
 observation noise of a hop with action ``a`` is ``var(nu) + s_{a,d}^2``.
 
 Where the numbers come from (``benchmarks/error_factors.py``: 600 loop-like departure states
@@ -198,6 +200,17 @@ class FitSettings:
         u = np.asarray(self.coupled, dtype=np.float64)
         return (self.offset_std * np.asarray(self.scale)) ** 2 * (1.0 - u)
 
+    def shared_cov(self, k: np.ndarray) -> np.ndarray:
+        """Covariance of the shared terms (offset and field) at kernel values ``k``, before
+        the weights ``w_a w_a'`` (:attr:`coupling`), m^2."""
+        return self.field_std**2 * self.field_correlation * k + self.offset_std**2
+
+    def own_cov(self, k: np.ndarray, act: np.ndarray, d: int) -> np.ndarray:
+        """Covariance of the terms of action ``act`` (last axis of ``k``) of its own on axis
+        ``d`` (field, offset of an uncoupled action, bias), at kernel values ``k``, m^2:
+        added where the two actions are the same."""
+        return k * self.own_var[act, d] + (self.bias_std**2 + self.own_offset_var[act, d])
+
     def prior_var(self) -> np.ndarray:
         """``(n_actions, 2)`` prior variance of the mean error ``e_d(x, a)``, m^2."""
         terrain = (self.field_std**2 + self.offset_std**2) * np.asarray(self.scale) ** 2
@@ -303,9 +316,7 @@ class LandingErrorGP:
         s = self.settings
         w = s.coupling[act, d]
         same = act[:, None] == act[None, :]
-        shared = s.field_std**2 * s.field_correlation * kx + s.offset_std**2
-        own = s.own_var[act, d][:, None] * kx + (s.bias_std**2 + s.own_offset_var[act, d])[:, None]
-        return np.outer(w, w) * shared + own * same
+        return np.outer(w, w) * s.shared_cov(kx) + s.own_cov(kx, act, d) * same
 
     def fit(
         self,
@@ -423,18 +434,17 @@ class LandingErrorGP:
     ) -> tuple[np.ndarray, np.ndarray]:
         s = self.settings
         ks = np.exp(-0.5 * _sq_dist(pts, self._x) / s.lengthscale**2)  # (m, n)
-        act, c2 = self._a, s.bias_std**2
+        act = self._a
         starts, ends = self._blocks()
         present = np.flatnonzero(ends > starts)
         m = pts.shape[0]
         mean = np.zeros((m, self.n_actions, 2))
         var = np.zeros((m, self.n_actions, 2))
         for d, ax in enumerate(self._axes):
-            # cross-covariance of (x, a) with datum i: w_a w_{a_i} (rho f^2 k + o^2) +
-            # [a = a_i] (own_a k + c2 + own offset_a), with w_a = s_a u_a
+            # cross-covariance of (x, a) with datum i: w_a w_{a_i} shared + [a = a_i] own
             w = s.coupling[:, d]
-            shared = (s.field_std**2 * s.field_correlation * ks + s.offset_std**2) * w[act]
-            own = ks * s.own_var[act, d] + (c2 + s.own_offset_var[act, d])
+            shared = s.shared_cov(ks) * w[act]
+            own = s.own_cov(ks, act, d)  # column i: the own part for a = a_i
             g = (shared.astype(np.float32) @ ax.inv.astype(np.float32)).astype(np.float64)
             q_shared = (g * shared).sum(1)
             m_shared = shared @ ax.alpha
