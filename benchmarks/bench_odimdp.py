@@ -2,8 +2,8 @@
 
 The case-study abstraction of scenario ``a`` (``!Haz U Goal``) is built twice from the same
 landing-error GP, fitted on the hops of real runs of the navigation runner (MuJoCo, the
-runner's own loop; an observer collects every hop's departure position and landing error
-``landing - target``):
+runner's own loop; an observer collects every hop's departure position, landing error
+``landing - target`` and executed action):
 
 * the **product-interval** IMDP of the runner (:func:`planner.intervals.transition_intervals`:
   per-successor bounds that are products of the per-axis bounds; the adversary may pick
@@ -15,8 +15,11 @@ runner's own loop; an observer collects every hop's departure position and landi
 For 0 (the prior), 50, 100 and 150 hops of data it prints ``P_check`` at the initial
 product state of both (certified; the decoupled one is exact for its adversary) and checks
 that the decoupled value is never below the product-interval one and strictly above it for
-at least one data size. The GP, the bounds (``delta``, samples per axis) and the noise are
-the runner's defaults.
+at least one data size. The landing-error model (its prior from the scene), the bounds
+(``delta``, samples per axis) and the noise are the runner's. The decoupled model takes the
+known noise nu only, not the model's per-action residual that the product-interval
+intervals add to it, so its values are not yet a guarantee under that model (the runner
+does not use it).
 
 Run from the repository root:
 ``PYTHONPATH=. python benchmarks/bench_odimdp.py [--seeds 0 1 2] [--hops 50 100 150]``
@@ -30,9 +33,10 @@ import time
 import numpy as np
 
 from hopper_sim.events import Observer
-from hopper_sim.runner import NavigationRunner, RunnerSettings
+from hopper_sim.runner import NavigationRunner
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.decoupled import DecoupledProduct, grid_decoupled_model
+from planner.imdp.grid import ACTIONS
 from planner.imdp.product import ProductIMDP
 from planner.intervals import cell_error_bounds, transition_intervals
 from planner.ltl.translate import translate
@@ -45,13 +49,17 @@ class HopCollector(Observer):
     def __init__(self) -> None:
         self.positions: list[np.ndarray] = []
         self.errors: list[np.ndarray] = []
+        self.actions: list[int] = []
 
     def on_hop(self, event) -> None:
         self.positions.append(np.asarray(event.start_pos, dtype=float))
         self.errors.append(np.asarray(event.landing, float) - np.asarray(event.target, float))
+        self.actions.append(ACTIONS.index(event.executed_action))
 
 
-def collect(scenario, n_hops: int, seeds: list[int]) -> tuple[np.ndarray, np.ndarray, float]:
+def collect(
+    scenario, n_hops: int, seeds: list[int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     obs = HopCollector()
     runner = NavigationRunner(scenario, observer=obs)
     t0 = time.perf_counter()
@@ -61,7 +69,8 @@ def collect(scenario, n_hops: int, seeds: list[int]) -> tuple[np.ndarray, np.nda
         runner.run(seed=seed)
     if len(obs.positions) < n_hops:
         raise SystemExit(f"only {len(obs.positions)} hops from seeds {seeds}; give more --seeds")
-    return np.array(obs.positions), np.array(obs.errors), time.perf_counter() - t0
+    data = np.array(obs.positions), np.array(obs.errors), np.array(obs.actions, dtype=np.int64)
+    return (*data, time.perf_counter() - t0)
 
 
 def main() -> None:
@@ -71,17 +80,17 @@ def main() -> None:
     ap.add_argument("--hops", type=int, nargs="+", default=[50, 100, 150])
     args = ap.parse_args()
     sc = load_scenario(args.scenario)
-    positions, errors, t_runs = collect(sc, max(args.hops), args.seeds)
+    positions, errors, actions, t_runs = collect(sc, max(args.hops), args.seeds)
     print(f"scenario {args.scenario}: {len(positions)} hops from real runs ({t_runs:.1f} s)")
     runner = NavigationRunner(sc)  # the runner's grid, settings and noise
     grid, settings = runner.grid, runner.synthesis_settings
-    gp_settings = RunnerSettings().gp
+    gp_settings = runner.gp_settings
     automaton = translate(sc.formula)
     enabled_s, enabled_a = np.nonzero(grid.enabled[: grid.n_cells])
     rows = []
     for n in [0, *args.hops]:
-        gp = LandingErrorGP(gp_settings, seed=0)
-        gp.fit(positions[:n].reshape(-1, 2), errors[:n].reshape(-1, 2))
+        gp = LandingErrorGP(gp_settings)
+        gp.fit(positions[:n].reshape(-1, 2), errors[:n].reshape(-1, 2), actions[:n])
         bounds = cell_error_bounds(
             gp, grid, samples_per_axis=settings.samples_per_axis, delta=settings.delta
         )
@@ -95,8 +104,8 @@ def main() -> None:
             grid,
             enabled_s,
             enabled_a,
-            bounds.lower[enabled_s],
-            bounds.upper[enabled_s],
+            bounds.lower[enabled_s, enabled_a],
+            bounds.upper[enabled_s, enabled_a],
             settings.noise,
             initial=[sc.start_cell],
         )
