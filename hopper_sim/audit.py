@@ -61,13 +61,13 @@ from hopper_sim.environment import HopperGridEnv
 from hopper_sim.events import HopEvent, Observer
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.runner import NavigationRunner
+from planner._util.torch_threads import torch_threads
 from planner.audit import AuditResult
 from planner.audit import audit_intervals as audit
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.grid import ACTIONS, GridWorld
 from planner.intervals import TransitionIntervals
 from planner.learning import Resynthesis, resynthesise
-from planner.torch_threads import torch_threads
 
 
 @dataclass(frozen=True)

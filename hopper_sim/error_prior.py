@@ -45,7 +45,7 @@ from hopper_sim.controller import LegAngleController
 from hopper_sim.controller.simulator import nominal_energy
 from hopper_sim.hop import simulate_hop
 from hopper_sim.model import HopperModel
-from planner.atomic import atomic_write
+from planner._util.atomic import atomic_write
 from planner.gp import FitSettings, TruncatedGaussianNoise
 from planner.imdp.grid import ACTION_OFFSETS
 

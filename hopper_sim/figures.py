@@ -48,7 +48,7 @@ from hopper_sim.styles import (
     region_letters,
     simulate_cvd,
 )
-from planner.atomic import atomic_write
+from planner._util.atomic import atomic_write
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -2,7 +2,7 @@
 
 :class:`RerunRecorder` is an :class:`~hopper_sim.events.Observer` that writes one rerun
 recording (``.rrd``, rerun-sdk 0.41, headless file sink) per invocation. It writes into a
-private temporary folder beside the target (:func:`planner.atomic.new_temporary_folder`: no
+private temporary folder beside the target (:func:`planner._util.atomic.new_temporary_folder`: no
 planted link is followed) and moves the file into place on :meth:`RerunRecorder.close`, so
 a crashed invocation never leaves a half-written recording. Hops are buffered per run and
 written with ``send_columns`` (one call per entity for up to ``flush_every`` hops), at each
@@ -128,7 +128,7 @@ from hopper_sim.styles import (
     region_components,
     region_letters,
 )
-from planner.atomic import new_temporary_folder
+from planner._util.atomic import new_temporary_folder
 
 if TYPE_CHECKING:
     from hopper_sim.events import ResynthesisRecord
@@ -253,7 +253,7 @@ class RerunRecorder(Observer):
         if not self.path.parent.is_dir():
             raise RecordingError(f"cannot write {self.path}: folder {self.path.parent} missing")
         # rerun opens the sink by name: a private folder beside the target holds it, so no
-        # planted file or link can be written through (planner.atomic)
+        # planted file or link can be written through (planner._util.atomic)
         self._tmp_folder = new_temporary_folder(self.path)
         self._tmp = self._tmp_folder / self.path.name
         # removed on close/discard, else when the recorder is collected or Python exits

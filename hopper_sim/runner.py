@@ -63,6 +63,7 @@ from hopper_sim.events import (
     RunStart,
     SynthesisEvent,
 )
+from planner._util.torch_threads import torch_threads
 from planner.gp.landing import FitSettings, LandingErrorGP
 from planner.imdp.grid import ACTIONS
 from planner.imdp.product import check_product_size
@@ -72,7 +73,6 @@ from planner.ltl.translate import translate
 from planner.policy import SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
 from planner.scenario import Scenario
-from planner.torch_threads import torch_threads
 from planner.verdict import ACCEPTED, REJECTED, AutomatonVerdicts, MissionMonitor, describe
 
 

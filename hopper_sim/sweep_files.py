@@ -27,8 +27,8 @@ from hopper_sim.sweep import (
     SweepRow,
     summary_record,
 )
-from planner.atomic import atomic_write
-from planner.textfile import read_text
+from planner._util.atomic import atomic_write
+from planner._util.textfile import read_text
 
 ROWS_FILE = "sweep_runs.csv"
 SUMMARY_FILE = "sweep_summary.csv"
@@ -185,7 +185,7 @@ def format_table(result: SweepResult) -> str:
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (:func:`planner.atomic.atomic_write`), creating
+    """Write ``text`` to ``path`` atomically (:func:`planner._util.atomic.atomic_write`), creating
     its folder; ``path`` is either the old file or the complete new one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -45,14 +45,14 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.atomic import atomic_write
+from planner._util.atomic import atomic_write
+from planner._util.sealed import SealError, read_limited, seal, unseal
 from planner.errors import QTableError
 from planner.imdp import IMDP, OrderingAdversary
-from planner.sealed import SealError, read_limited, seal, unseal
 
 FORMAT_TAG = "hopnav-robust-q"
 FORMAT_VERSION = 1
-#: The kind named in the header of the sealed file (:mod:`planner.sealed`).
+#: The kind named in the header of the sealed file (:mod:`planner._util.sealed`).
 SEAL_KIND = "robust-q-table"
 #: Largest Q-table file read [bytes].
 MAX_FILE_BYTES = 1 << 30
@@ -440,7 +440,7 @@ class RobustQLearner:
     def load(cls, path: str | os.PathLike[str]) -> RobustQLearner:
         """Read a file written by :meth:`save`; raises :class:`QTableError` naming the file and
         the field when it is unreadable, altered (the digest of the sealed file,
-        :mod:`planner.sealed`, does not match) or inconsistent."""
+        :mod:`planner._util.sealed`, does not match) or inconsistent."""
         path = Path(path)
         try:
             data = read_limited(path, MAX_FILE_BYTES)

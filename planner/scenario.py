@@ -62,6 +62,8 @@ from typing import Any
 
 import numpy as np
 
+from planner._util.textfile import read_text
+from planner._util.toml_lines import key_lines, line_of, nesting_depth
 from planner.errors import (
     LTLSyntaxError,
     MissingKeyError,
@@ -78,8 +80,6 @@ from planner.errors import (
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
-from planner.textfile import read_text
-from planner.toml_lines import key_lines, line_of, nesting_depth
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -2,8 +2,8 @@
 path a writer is about to use is never followed (the file it points to stays as it was),
 and the written files' modes follow the user's umask.
 
-Every writer of the project goes through :func:`planner.atomic.atomic_write` or, for rerun's
-file sink, :func:`planner.atomic.new_temporary_folder`; each is exercised here through its
+Every writer of the project goes through :func:`planner._util.atomic.atomic_write` or, for rerun's
+file sink, :func:`planner._util.atomic.new_temporary_folder`; each is exercised here through its
 public function. The temporary name is drawn with :func:`secrets.token_hex`; the tests make
 the first draw predictable and plant a link there, as an attacker who guessed it would.
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import planner.atomic as atomic
+import planner._util.atomic as atomic
 
 VICTIM_TEXT = b"precious: must not change\n"
 

@@ -162,7 +162,7 @@ def test_scenario_reader(tmp_path, data):
 @FAST
 @given(text=st.text(alphabet="[]{}\"'#=a1,\n .", max_size=400))
 def test_toml_scanners_never_raise(text):
-    from planner.toml_lines import key_lines, nesting_depth
+    from planner._util.toml_lines import key_lines, nesting_depth
 
     depth, line = nesting_depth(text)
     assert depth >= 0 and 1 <= line <= text.count("\n") + 1

@@ -47,7 +47,7 @@ def _stdin_lines() -> Iterator[tuple[int, str]]:
     """``(line number, text)`` of stdin, decoded strictly as UTF-8, lines of at most
     :data:`MAX_LINE_BYTES`; raises :class:`HopInputError` naming the line otherwise."""
     from hopper_sim.hop import HopInputError
-    from planner.textfile import decoded_lines
+    from planner._util.textfile import decoded_lines
 
     buffer = getattr(sys.stdin, "buffer", None)
     if buffer is None:  # a text stream (tests): already decoded

@@ -251,7 +251,7 @@ def _previous_rows(
     from hopper_sim.provenance import ProvenanceError, require_same_scenario
     from hopper_sim.sweep import SweepError
     from hopper_sim.sweep_files import MAX_CSV_BYTES, ROWS_FILE, SweepFileError
-    from planner.textfile import read_text
+    from planner._util.textfile import read_text
 
     rows_path, meta_path = out / ROWS_FILE, out / META_FILE
     if not rows_path.is_file() and not meta_path.exists():

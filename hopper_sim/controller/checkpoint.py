@@ -1,6 +1,6 @@
 """Saving and loading trained hop models with their provenance.
 
-A checkpoint file is sealed (:mod:`planner.sealed`): a header line with the SHA-256 of all
+A checkpoint file is sealed (:mod:`planner._util.sealed`): a header line with the SHA-256 of all
 its bytes, then one ``torch.save`` payload holding plain data only (tensors, numbers,
 strings, lists, dicts), read back with ``torch.load(weights_only=True)``:
 
@@ -38,8 +38,8 @@ from hopper_sim.controller.errors import (
     CheckpointVersionError,
 )
 from hopper_sim.controller.hop_model import N_OUTPUTS, HopNet, InputRanges
-from planner.atomic import atomic_write
-from planner.sealed import SealError, read_limited, seal, unseal
+from planner._util.atomic import atomic_write
+from planner._util.sealed import SealError, read_limited, seal, unseal
 
 CHECKPOINT_FORMAT = "hopnav-hop-model"
 #: 2: sealed with a digest of the file (version 1 files have none and are refused).

@@ -27,7 +27,7 @@ import numpy as np
 
 from hopper_sim.controller.errors import DatasetError, InputShapeError
 from hopper_sim.controller.hop_model import N_INPUTS, N_OUTPUTS, InputRanges
-from planner.atomic import atomic_write
+from planner._util.atomic import atomic_write
 
 DATASET_VERSION = 1
 

@@ -574,7 +574,7 @@ def huge_weight_checkpoint() -> bytes:
     import torch
 
     from hopper_sim.controller.checkpoint import SEAL_KIND
-    from planner.sealed import seal, unseal
+    from planner._util.sealed import seal, unseal
 
     payload = torch.load(io.BytesIO(unseal(shipped_checkpoint(), SEAL_KIND)), weights_only=True)
     payload["state_dict"]["trunk.2.weight"][3, 7] = 1.36e38
@@ -1082,7 +1082,7 @@ def truncate_source(
 
 def unsealed_checkpoint() -> bytes:
     from hopper_sim.controller.checkpoint import SEAL_KIND
-    from planner.sealed import unseal
+    from planner._util.sealed import unseal
 
     return unseal(shipped_checkpoint(), SEAL_KIND)
 

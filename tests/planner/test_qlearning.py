@@ -5,6 +5,7 @@ import io
 import numpy as np
 import pytest
 
+from planner._util.sealed import seal
 from planner.errors import QTableError
 from planner.imdp import IMDP, DiscountedReward, Problem, Specification, ValueIteration, solve
 from planner.qlearning import (
@@ -15,7 +16,6 @@ from planner.qlearning import (
     greedy_action,
     robust_q_iteration,
 )
-from planner.sealed import seal
 
 
 def _tiny() -> IMDP:

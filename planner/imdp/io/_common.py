@@ -13,9 +13,9 @@ import os
 from collections.abc import Callable, Iterator
 from typing import TextIO
 
-from planner.atomic import atomic_write as atomic_text
+from planner._util.atomic import atomic_write as atomic_text
+from planner._util.textfile import decoded_lines
 from planner.errors import ModelFormatError
-from planner.textfile import decoded_lines
 
 
 def atomic_write(path: str | os.PathLike[str], fill: Callable[[TextIO], None]) -> None:

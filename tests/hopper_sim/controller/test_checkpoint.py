@@ -22,7 +22,7 @@ from hopper_sim.controller.errors import (
     CheckpointModelMismatchError,
     CheckpointVersionError,
 )
-from planner.sealed import seal, unseal
+from planner._util.sealed import seal, unseal
 
 
 @pytest.fixture()

@@ -5,7 +5,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from planner.toml_lines import key_lines, line_of
+from planner._util.toml_lines import key_lines, line_of
 
 TEXT = '''# comment
 name = "x"  # trailing

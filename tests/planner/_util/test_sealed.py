@@ -1,4 +1,4 @@
-"""Sealed files (:mod:`planner.sealed`): every single-bit flip, truncation and appended tail
+"""Sealed files (:mod:`planner._util.sealed`): every single-bit flip, truncation and appended tail
 is refused, exhaustively for a small file and for every header bit of the shipped
 checkpoint (its payload bits are sampled in ``tests/hopper_sim/controller``)."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.sealed import SealError, is_sealed, read_limited, seal, unseal
+from planner._util.sealed import SealError, is_sealed, read_limited, seal, unseal
 
 
 def _flips(data: bytes, positions):

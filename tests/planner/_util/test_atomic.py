@@ -3,7 +3,7 @@ import stat
 
 import pytest
 
-from planner.atomic import atomic_write
+from planner._util.atomic import atomic_write
 
 
 def test_replaces_whole_file_with_normal_permissions(tmp_path):
