@@ -29,7 +29,7 @@ Procedure (issue "learning", acceptance), sampling hops the way the navigation l
    backup threshold and another allowed action is cheaper.
 5. For every (cell, action, successor) triple of the *full* pairs, the empirical frequency of
    landing in the successor passes when it lies in ``[lower - m, upper + m]``, ``m`` the 99 %
-   binomial margin (:func:`planner.audit.audit_intervals`, unchanged). Successors the intervals
+   binomial margin (:func:`planner.audit.audit_counts`, unchanged). Successors the intervals
    leave out have ``[0, 0]``. Pairs with some but fewer than ``samples`` hops are audited
    separately with the margin of their own count (:attr:`SampledAudit.partial`). Failed hops
    (the hopper fell) are counted separately, not as landings.
@@ -63,7 +63,7 @@ from hopper_sim.noise import sample_model_noise
 from hopper_sim.runner import NavigationRunner
 from planner._util.torch_threads import torch_threads
 from planner.audit import AuditResult
-from planner.audit import audit_intervals as audit
+from planner.audit import audit_counts as audit
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.grid import ACTIONS, GridWorld
 from planner.intervals import TransitionIntervals

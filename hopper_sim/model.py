@@ -24,7 +24,7 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 from dm_control import mjcf
 
 
-class ModelError(ValueError):
+class HopperModelError(ValueError):
     """A model file or an override is invalid (names the file, key or value)."""
 
 
@@ -90,10 +90,14 @@ OVERRIDE_KEYS: tuple[str, ...] = _PHYSICAL_KEYS + tuple(_NUMERIC_KEYS)
 def _apply_overrides(root: mjcf.RootElement, overrides: dict[str, float]) -> None:
     for key, value in overrides.items():
         if key not in OVERRIDE_KEYS:
-            raise ModelError(f"unknown model override {key!r}; known: {', '.join(OVERRIDE_KEYS)}")
+            raise HopperModelError(
+                f"unknown model override {key!r}; known: {', '.join(OVERRIDE_KEYS)}"
+            )
         value = float(value)
         if not np.isfinite(value) or (value <= 0.0 and key != "thrust_limit") or value < 0.0:
-            raise ModelError(f"model override {key!r} must be a finite positive number: {value}")
+            raise HopperModelError(
+                f"model override {key!r} must be a finite positive number: {value}"
+            )
         if key == "mass":
             root.find("body", C.BODY_COM).inertial.mass = value
         elif key == "stiffness":
@@ -165,9 +169,11 @@ class HopperModel:
             [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in C.COM_JOINTS]
         )
         if min(self.com_body, foot_body, self.leg_tendon, self.thrust_actuator) < 0:
-            raise ModelError("the model lacks one of the named hopper elements (constants.py)")
+            raise HopperModelError(
+                "the model lacks one of the named hopper elements (constants.py)"
+            )
         if self.foot_mocap < 0:
-            raise ModelError(f"body {C.BODY_FOOT!r} must be a mocap body")
+            raise HopperModelError(f"body {C.BODY_FOOT!r} must be a mocap body")
         self.params = SlipParams(
             mass=float(m.body_mass[self.com_body]),
             rest_length=float(m.tendon_lengthspring[self.leg_tendon, 0]),
@@ -177,12 +183,12 @@ class HopperModel:
             thrust_limit=float(m.actuator_ctrlrange[self.thrust_actuator, 1]),
         )
         if self.params.gravity <= 0.0:
-            raise ModelError(f"gravity must point down (-z): opt.gravity = {m.opt.gravity}")
+            raise HopperModelError(f"gravity must point down (-z): opt.gravity = {m.opt.gravity}")
         if m.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4:
-            raise ModelError("the hopper model must use the RK4 integrator")
+            raise HopperModelError("the hopper model must use the RK4 integrator")
         omega_dt = np.sqrt(self.params.stiffness / self.params.mass) * self.params.timestep
         if omega_dt > MAX_OMEGA_DT:
-            raise ModelError(
+            raise HopperModelError(
                 f"time step {self.params.timestep} s is too coarse for the leg: "
                 f"sqrt(k/m) dt = {omega_dt:.3g} > {MAX_OMEGA_DT} (RK4 would lose accuracy)"
             )
@@ -190,7 +196,7 @@ class HopperModel:
         def numeric(name: str) -> float:
             nid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_NUMERIC, name)
             if nid < 0:
-                raise ModelError(f"the scene lacks the custom numeric {name!r}")
+                raise HopperModelError(f"the scene lacks the custom numeric {name!r}")
             return float(m.numeric_data[m.numeric_adr[nid]])
 
         self.perturbation = PerturbationParams(
@@ -215,11 +221,11 @@ class HopperModel:
             path: an MJCF scene with the same named elements.
 
         Raises:
-            ModelError: unknown key, non-positive value, or a file without the named elements.
+            HopperModelError: unknown key, non-positive value, or a file without the named elements.
         """
         path = Path(path) if path is not None else C.SCENE_XML
         if not path.is_file():
-            raise ModelError(f"model file not found: {path}")
+            raise HopperModelError(f"model file not found: {path}")
         root = mjcf.from_path(str(path))
         _apply_overrides(root, dict(overrides or {}))
         return cls(root)
@@ -232,7 +238,7 @@ class HopperModel:
         """
         copies = int(copies)
         if copies < 1:
-            raise ModelError(f"need at least one copy of the hopper, got {copies}")
+            raise HopperModelError(f"need at least one copy of the hopper, got {copies}")
         cache = self.__dict__.setdefault("_replicated", {})
         if copies in cache:
             return cache[copies]
@@ -247,7 +253,7 @@ class HopperModel:
         def ids(obj: mujoco.mjtObj, name: str) -> np.ndarray:
             out = [mujoco.mj_name2id(m, obj, (f"h{k}/" if k else "") + name) for k in range(copies)]
             if min(out) < 0:
-                raise ModelError(f"replicated model lacks {name!r} in some copy")
+                raise HopperModelError(f"replicated model lacks {name!r} in some copy")
             return np.array(out)
 
         joints = np.stack([ids(mujoco.mjtObj.mjOBJ_JOINT, j) for j in C.COM_JOINTS], axis=1)

@@ -42,7 +42,7 @@ class AuditResult:
     offenders: tuple[Offender, ...]
 
 
-def audit_intervals(
+def audit_counts(
     intervals: TransitionIntervals,
     state: np.ndarray,
     action: np.ndarray,

@@ -189,3 +189,8 @@ class QTableError(PlannerError):
 
 class PolicyError(PlannerError):
     """A policy is asked to act where it cannot (no allowed action, bad parameters)."""
+
+
+class SealError(PlannerError):
+    """Sealed bytes (:mod:`planner._util.sealed`) are not of the expected kind, or their
+    digest does not match; the readers of sealed files turn it into their own error type."""

@@ -22,13 +22,11 @@ import os
 import re
 from pathlib import Path
 
+from planner.errors import SealError
+
 MAGIC = b"hopnav-sealed"
 _HEADER = re.compile(rb"hopnav-sealed ([a-z][a-z0-9-]{0,63}) sha256=([0-9a-f]{64})\n")
 _MAX_HEADER = 160
-
-
-class SealError(ValueError):
-    """Sealed bytes are not of the expected kind, or their digest does not match."""
 
 
 def _digest(kind: bytes, payload: bytes) -> str:

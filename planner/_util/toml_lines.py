@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import re
 
+from planner.errors import PlannerError
+
 _BARE = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
 
 
-class _Stop(Exception):
-    pass
+class _Stop(PlannerError):
+    """The scanner cannot follow the text; caught in :func:`key_lines`, never escapes."""
 
 
 class _Scanner:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hopper_sim import constants as C
-from hopper_sim.model import HopperModel, ModelError
+from hopper_sim.model import HopperModel, HopperModelError
 
 MJCF_FILES = sorted(C.MODELS_DIR.glob("*.xml"))
 
@@ -64,11 +64,11 @@ def test_overrides_change_the_compiled_model_and_the_hash():
 
 
 def test_bad_overrides_raise_specific_errors():
-    with pytest.raises(ModelError, match="unknown model override 'masss'"):
+    with pytest.raises(HopperModelError, match="unknown model override 'masss'"):
         HopperModel.load({"masss": 1.0})
-    with pytest.raises(ModelError, match="'stiffness'"):
+    with pytest.raises(HopperModelError, match="'stiffness'"):
         HopperModel.load({"stiffness": -1.0})
-    with pytest.raises(ModelError, match="too coarse"):
+    with pytest.raises(HopperModelError, match="too coarse"):
         HopperModel.load({"stiffness": 1e9})
-    with pytest.raises(ModelError, match="not found"):
+    with pytest.raises(HopperModelError, match="not found"):
         HopperModel.load(path="/nonexistent/scene.xml")

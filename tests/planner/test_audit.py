@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.audit import audit_intervals
+from planner.audit import audit_counts
 from planner.errors import IntervalError
 from planner.intervals import TransitionIntervals
 
@@ -23,12 +23,12 @@ def _intervals() -> TransitionIntervals:
 def test_audit_passes_inside_and_flags_outside_with_the_binomial_margin():
     n = 400
     margin = 2.5758293 * np.sqrt(0.25 / n)  # 0.0644
-    inside = audit_intervals(_intervals(), [0], [1], np.array([[100, 300, 0]]))
+    inside = audit_counts(_intervals(), [0], [1], np.array([[100, 300, 0]]))
     assert inside.fraction == 1.0 and inside.num_triples == 2
     assert inside.margin[0] == pytest.approx(margin)
     # frequency 0.5 of successor 0: 0.1 above its upper bound, outside the margin;
     # 0.05 in the unlisted successor 2: bounds [0, 0], within the margin
-    res = audit_intervals(_intervals(), [0], [1], np.array([[200, 180, 20]]))
+    res = audit_counts(_intervals(), [0], [1], np.array([[200, 180, 20]]))
     assert res.num_triples == 3
     assert [o.successor for o in res.offenders] == [0]
     assert res.offenders[0].excess == pytest.approx(0.5 - 0.4 - margin)
@@ -37,8 +37,8 @@ def test_audit_passes_inside_and_flags_outside_with_the_binomial_margin():
 
 def test_audit_rejects_bad_input():
     with pytest.raises(IntervalError, match="counts of shape"):
-        audit_intervals(_intervals(), [0], [1], np.array([[1, 2]]))
+        audit_counts(_intervals(), [0], [1], np.array([[1, 2]]))
     with pytest.raises(IntervalError, match="no samples"):
-        audit_intervals(_intervals(), [0], [1], np.array([[0, 0, 0]]))
+        audit_counts(_intervals(), [0], [1], np.array([[0, 0, 0]]))
     with pytest.raises(IntervalError, match="only once"):
-        audit_intervals(_intervals(), [0, 0], [1, 1], np.ones((2, 3), dtype=int))
+        audit_counts(_intervals(), [0, 0], [1, 1], np.ones((2, 3), dtype=int))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm, truncnorm
 
-from planner.audit import audit_intervals
+from planner.audit import audit_counts
 from planner.errors import IntervalError
 from planner.gp import FitSettings, LandingErrorGP
 from planner.imdp.grid import GridWorld
@@ -282,7 +282,7 @@ def test_empirical_frequencies_lie_in_the_intervals(fitted_gp):
         # the data's noise: N(0, 0.1^2) per axis, which the model splits into nu + residual
         err = action_error(start, np.full(n, action[k])) + rng.normal(0.0, 0.1, (n, 2))
         counts[row] = np.bincount(GRID.locate(target + err), minlength=NX * NY + 1)
-    result = audit_intervals(ti, state[pick], action[pick], counts)
+    result = audit_counts(ti, state[pick], action[pick], counts)
     assert result.fraction >= 0.99
     assert result.num_triples >= 100  # 40 pairs, several successors each
 
