@@ -11,18 +11,19 @@ of the letters that lead to each successor).
 :func:`from_hoa` reads a *deterministic* automaton (one initial state, pairwise disjoint
 edge labels per state, no universal branching) with any acceptance condition (Rabin, Büchi,
 co-Büchi, parity, or a generic ``Inf``/``Fin`` formula), state- or transition-based marks,
-explicit or implicit labels, aliases. Missing edges go to a rejecting sink. Transition
-marks become state marks by splitting each state by the marks of the edge that enters it;
-the acceptance formula is put in disjunctive normal form, each disjunct
-``Fin(..) & .. & Inf(I_1) & .. & Inf(I_k)`` becomes one Rabin pair, with a round-robin
-counter over ``I_1 .. I_k`` when ``k >= 2`` (degeneralisation). The result is reduced with
-:func:`planner.ltl.reduce.reduce_rabin`.
+explicit or implicit labels, aliases. This module parses the text into a successor table
+with edge marks; :mod:`planner.ltl.acceptance` makes it state-based Rabin. Missing edges go
+to a rejecting sink. Transition marks become state marks by splitting each state by the
+marks of the edge that enters it; the acceptance formula is put in disjunctive normal form,
+each disjunct ``Fin(..) & .. & Inf(I_1) & .. & Inf(I_k)`` becomes one Rabin pair, with a
+round-robin counter over ``I_1 .. I_k`` when ``k >= 2`` (degeneralisation). The result is
+reduced with :func:`planner.ltl.reduce.reduce_rabin`.
 
 Reading is bounded as a translation is (:mod:`planner.ltl.budget`): at most 16 propositions
 (``2^16`` letters), ``States:`` times letters at most ``2^22`` table entries (checked before
 the table is allocated), label and acceptance expressions nested at most
-:data:`MAX_NESTING` deep, acceptance conditions of at most :data:`MAX_DISJUNCTS` disjuncts,
-and the default time limit.
+:data:`MAX_NESTING` deep, acceptance conditions of at most
+:data:`~planner.ltl.acceptance.MAX_DISJUNCTS` disjuncts, and the default time limit.
 """
 
 from __future__ import annotations
@@ -31,12 +32,11 @@ import re
 
 import numpy as np
 
-from planner.automaton import RabinAutomaton, RabinPair
+from planner.automaton import RabinAutomaton
 from planner.errors import HOAError, NondeterministicAutomatonError
+from planner.ltl.acceptance import marks_to_rabin
 from planner.ltl.boolean import cover
 from planner.ltl.budget import TranslationLimits, limited, tick
-from planner.ltl.interning import intern
-from planner.ltl.reduce import reduce_rabin
 
 
 def _quote(text: str) -> str:
@@ -134,8 +134,6 @@ def _lex(text: str) -> list[_Tok]:
 
 #: Deepest nesting of a label or acceptance expression (parentheses, negations, aliases).
 MAX_NESTING = 100
-#: Most disjuncts of an acceptance condition in disjunctive normal form (Rabin pairs).
-MAX_DISJUNCTS = 4096
 
 
 class _Reader:
@@ -393,7 +391,7 @@ def _from_hoa(text: str) -> RabinAutomaton:
         raise HOAError(f"line {end.line}: the automaton was aborted (--ABORT--)")
     if end.kind != "marker" or end.text != "--END--":
         raise HOAError(f"line {end.line}: expected 'State:' or '--END--', found {end.text!r}")
-    return _to_rabin(table, marks, start, acceptance, aps)
+    return marks_to_rabin(table, marks, start, acceptance, aps)
 
 
 def _label_atom(r: _Reader):
@@ -445,113 +443,6 @@ def _acc_sig(r: _Reader, n_sets: int) -> frozenset[int]:
         out.add(n)
     r.expect("punct", "'}'", "}")
     return frozenset(out)
-
-
-def _dnf(cond) -> list[list[tuple[str, int, bool]]]:
-    """Disjunctive normal form of an acceptance condition: list of conjunctions of atoms."""
-    kind = cond[0]
-    if kind == "const":
-        return [[]] if cond[1] else []
-    if kind in ("Inf", "Fin"):
-        return [[(kind, cond[1], cond[2])]]
-    parts = [_dnf(c) for c in cond[1]]
-    if kind == "|":
-        return [c for p in parts for c in p]
-    out: list[list[tuple[str, int, bool]]] = [[]]
-    for p in parts:
-        if len(out) * len(p) > MAX_DISJUNCTS:
-            raise HOAError(
-                f"the acceptance condition has more than {MAX_DISJUNCTS} disjuncts in "
-                "disjunctive normal form"
-            )
-        out = [a + b for a in out for b in p]
-    return out
-
-
-def _to_rabin(table, marks, start, acceptance, aps) -> RabinAutomaton:
-    n_letters = table.shape[1]
-    conjuncts = _dnf(acceptance)
-    infs = [[(n, neg) for kind, n, neg in c if kind == "Inf"] for c in conjuncts]
-    fins = [[(n, neg) for kind, n, neg in c if kind == "Fin"] for c in conjuncts]
-    gen = [i for i, c in enumerate(infs) if len(c) >= 2]
-
-    def member(m: frozenset[int], atom: tuple[int, bool]) -> bool:
-        return (atom[0] in m) != atom[1]
-
-    # State-based input (every edge of a state has the same marks) keeps one state per
-    # state; otherwise states are split by the marks of the edge that enters them.
-    n_states = table.shape[0]
-    defined = table >= 0
-    own_marks: list[frozenset[int] | None] = []
-    for q in range(n_states):
-        ms = {marks[q, x] for x in range(n_letters) if defined[q, x]}
-        own_marks.append(next(iter(ms)) if len(ms) == 1 else frozenset() if not ms else None)
-    state_based = all(m is not None for m in own_marks)
-
-    sink = ("sink",)
-    first = own_marks[start] if state_based else frozenset()
-    init = (start, first, tuple(0 for _ in gen))
-    index = {init: 0}
-    states: list = [init]
-    rows: list[list[int]] = []
-    i = 0
-    while i < len(states):
-        key = states[i]
-        row = []
-        for x in range(n_letters):
-            if key == sink or table[key[0], x] < 0:
-                nxt = sink
-            else:
-                target = int(table[key[0], x])
-                m = own_marks[target] if state_based else marks[key[0], x]
-                counters = []
-                for c_i, d in enumerate(gen):
-                    c = key[2][c_i]
-                    k = len(infs[d])
-                    if c == k:
-                        c = 0
-                    while c < k and member(m, infs[d][c]):
-                        c += 1
-                    counters.append(c)
-                nxt = (target, m, tuple(counters))
-            j = intern(nxt, index, states)
-            row.append(j)
-        rows.append(row)
-        i += 1
-    n = len(states)
-    pairs = []
-    for d in range(len(conjuncts)):
-        good = np.zeros(n, dtype=bool)
-        bad = np.zeros(n, dtype=bool)
-        for s, key in enumerate(states):
-            if key == sink:
-                continue
-            _, m, counters = key
-            bad[s] = any(member(m, a) for a in fins[d])
-            if d in gen:
-                good[s] = counters[gen.index(d)] == len(infs[d])
-            elif infs[d]:
-                good[s] = member(m, infs[d][0])
-            else:
-                good[s] = True
-        pairs.append((good, bad))
-    names = [
-        "sink"
-        if k == sink
-        else f"{k[0]}" + (f" {{{' '.join(map(str, sorted(k[1])))}}}" if k[1] else "")
-        for k in states
-    ]
-    t, init_s, prs, nm = reduce_rabin(np.array(rows, dtype=np.int64), 0, pairs, names)
-    return RabinAutomaton(
-        aps,
-        t,
-        init_s,
-        [
-            RabinPair(frozenset(np.flatnonzero(g).tolist()), frozenset(np.flatnonzero(b).tolist()))
-            for g, b in prs
-        ],
-        state_names=nm,
-    )
 
 
 __all__ = ["from_hoa", "to_hoa"]

@@ -28,7 +28,8 @@ renamed and is marked infinitely often).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 from planner.ltl.interning import intern
@@ -59,6 +60,125 @@ def _text(tree: Node | None, marks: int) -> str:
     return go(tree)
 
 
+class _Successors:
+    """The NBA's successors of a set of states: ``delta(L, a)`` and ``delta_acc(L, a)``,
+    bitmasks over NBA states, cached per ``(L, a)``."""
+
+    def __init__(self, succ: list[list[int]], succ_acc: list[list[int]]) -> None:
+        self.succ, self.succ_acc = succ, succ_acc
+        self.cache: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def __call__(self, label: int, a: int) -> tuple[int, int]:
+        key = (label, a)
+        hit = self.cache.get(key)
+        if hit is not None:
+            return hit
+        out = out_acc = 0
+        rest = label
+        while rest:
+            low = rest & -rest
+            q = low.bit_length() - 1
+            out |= self.succ[q][a]
+            out_acc |= self.succ_acc[q][a]
+            rest ^= low
+        self.cache[key] = (out, out_acc)
+        return out, out_acc
+
+
+def _count(node: Node) -> int:
+    return 1 + sum(_count(c) for c in node[2])
+
+
+def _grow(node: Node, a: int, delta: _Successors, fresh: Iterator[int]) -> Node:
+    """Step 1: every label ``L`` becomes ``delta(L, a)``; a node reaching states through
+    accepting transitions gets a new youngest child (named from ``fresh``) holding them."""
+    name, label, children = node
+    new_label, new_acc = delta(label, a)
+    kids = [_grow(c, a, delta, fresh) for c in children]
+    if new_acc:
+        kids.append((next(fresh), new_acc, ()))
+    return (name, new_label, tuple(kids))
+
+
+class _Merge:
+    """Steps 2-4 on a grown tree: horizontal merge, removal of empty nodes, vertical merge;
+    records the smallest old name removed (``removed``) and marked (``marked``)."""
+
+    def __init__(self, n_old: int, top: int) -> None:
+        self.n_old = n_old
+        self.marked = top
+        self.removed = top
+        self.survivors: set[int] = set()
+
+    def _note_removed(self, node: Node) -> None:
+        self.survivors.discard(node[0])
+        if node[0] <= self.n_old:
+            self.removed = min(self.removed, node[0])
+        for c in node[2]:
+            self._note_removed(c)
+
+    def prune(self, node: Node, forbidden: int) -> Node | None:
+        """``node`` without the states in ``forbidden`` (those of the older siblings of the
+        node and of its ancestors); ``None`` if its label becomes empty."""
+        name, label, children = node
+        label &= ~forbidden
+        if not label:
+            self._note_removed(node)
+            return None
+        kids = []
+        covered = 0
+        for c in children:
+            r = self.prune(c, forbidden | covered)
+            if r is not None:
+                kids.append(r)
+                covered |= r[1]
+        if kids and covered == label:
+            self.marked = min(self.marked, name)
+            for k in kids:
+                self._note_removed(k)
+            kids = []
+        self.survivors.add(name)
+        return (name, label, tuple(kids))
+
+
+def _rename(node: Node, rank: dict[int, int]) -> Node:
+    """Step 5: the names ``rank[name]``."""
+    return (rank[node[0]], node[1], tuple(_rename(c, rank) for c in node[2]))
+
+
+def _step(
+    tree: Node | None, n_old: int, a: int, delta: _Successors, top: int
+) -> tuple[Node | None, int]:
+    """The successor of ``tree`` (``n_old`` nodes) on letter ``a`` and the step's priority
+    (module docstring; ``top`` = ``2n + 1``)."""
+    if tree is None:
+        return None, top
+    merge = _Merge(n_old, top)
+    result = merge.prune(_grow(tree, a, delta, itertools.count(n_old + 1)), 0)
+    removed, marked = merge.removed, merge.marked
+    if result is None:
+        return None, 2 * removed - 1 if removed < top else top
+    rank = {name: i + 1 for i, name in enumerate(sorted(merge.survivors))}
+    if removed < marked:
+        prio = 2 * removed - 1
+    elif marked < removed:
+        prio = 2 * marked
+    else:
+        prio = top
+    return _rename(result, rank), prio
+
+
+def _parity_pairs(prios: list[int]) -> list[tuple[set[int], set[int]]]:
+    """For every even priority ``2i`` present, the Rabin pair ``(G, B)``: ``G`` the states
+    entered with priority ``2i``, ``B`` those entered with a smaller one."""
+    pairs = []
+    for even in sorted({p for p in prios if p % 2 == 0}):
+        good = {s for s, p in enumerate(prios) if p == even}
+        bad = {s for s, p in enumerate(prios) if p < even}
+        pairs.append((good, bad))
+    return pairs
+
+
 def determinise(
     n_letters: int, initial: int, succ: list[list[int]], succ_acc: list[list[int]]
 ) -> SafraResult:
@@ -75,95 +195,8 @@ def determinise(
         succ: ``succ[q][a]``, bitmask of all ``a``-successors of NBA state ``q``.
         succ_acc: ``succ_acc[q][a]``, bitmask of successors through accepting transitions.
     """
-    delta_cache: dict[tuple[int, int], tuple[int, int]] = {}
-
-    def delta(label: int, a: int) -> tuple[int, int]:
-        key = (label, a)
-        hit = delta_cache.get(key)
-        if hit is not None:
-            return hit
-        out = out_acc = 0
-        rest = label
-        while rest:
-            low = rest & -rest
-            q = low.bit_length() - 1
-            out |= succ[q][a]
-            out_acc |= succ_acc[q][a]
-            rest ^= low
-        delta_cache[key] = (out, out_acc)
-        return out, out_acc
-
-    n_nba = max(len(succ), 1)
-    top = 2 * n_nba + 1
-
-    def count(node: Node) -> int:
-        return 1 + sum(count(c) for c in node[2])
-
-    def step(tree: Node | None, n_old: int, a: int) -> tuple[Node | None, int]:
-        if tree is None:
-            return None, top
-        fresh = n_old
-
-        def grow(node: Node) -> Node:
-            nonlocal fresh
-            name, label, children = node
-            new_label, new_acc = delta(label, a)
-            kids = [grow(c) for c in children]
-            if new_acc:
-                fresh += 1
-                kids.append((fresh, new_acc, ()))
-            return (name, new_label, tuple(kids))
-
-        marked = top
-        removed = top
-        survivors: set[int] = set()
-
-        def note_removed(node: Node) -> None:
-            nonlocal removed
-            survivors.discard(node[0])
-            if node[0] <= n_old:
-                removed = min(removed, node[0])
-            for c in node[2]:
-                note_removed(c)
-
-        def prune(node: Node, forbidden: int) -> Node | None:
-            nonlocal marked
-            name, label, children = node
-            label &= ~forbidden
-            if not label:
-                note_removed(node)
-                return None
-            kids = []
-            covered = 0
-            for c in children:
-                r = prune(c, forbidden | covered)
-                if r is not None:
-                    kids.append(r)
-                    covered |= r[1]
-            if kids and covered == label:
-                marked = min(marked, name)
-                for k in kids:
-                    note_removed(k)
-                kids = []
-            survivors.add(name)
-            return (name, label, tuple(kids))
-
-        result = prune(grow(tree), 0)
-        if result is None:
-            return None, 2 * removed - 1 if removed < top else top
-        rank = {name: i + 1 for i, name in enumerate(sorted(survivors))}
-
-        def rename(node: Node) -> Node:
-            return (rank[node[0]], node[1], tuple(rename(c) for c in node[2]))
-
-        if removed < marked:
-            prio = 2 * removed - 1
-        elif marked < removed:
-            prio = 2 * marked
-        else:
-            prio = top
-        return rename(result), prio
-
+    delta = _Successors(succ, succ_acc)
+    top = 2 * max(len(succ), 1) + 1
     start: tuple[Node | None, int] = ((1, 1 << initial, ()), top)
     index = {start: 0}
     states = [start]
@@ -175,21 +208,15 @@ def determinise(
         row = rows_by_tree.get(tree)
         if row is None:
             row = []
-            n_old = count(tree) if tree is not None else 0
+            n_old = _count(tree) if tree is not None else 0
             for a in range(n_letters):
-                nxt = step(tree, n_old, a)
+                nxt = _step(tree, n_old, a, delta, top)
                 j = intern(nxt, index, states)
                 row.append(j)
             rows_by_tree[tree] = row
         table.append(row)
         i += 1
-    prios = [p for _, p in states]
-    pairs = []
-    for even in sorted({p for p in prios if p % 2 == 0}):
-        good = {s for s, p in enumerate(prios) if p == even}
-        bad = {s for s, p in enumerate(prios) if p < even}
-        pairs.append((good, bad))
-    return SafraResult(table, _Names(states), pairs)
+    return SafraResult(table, _Names(states), _parity_pairs([p for _, p in states]))
 
 
 class _Names(Sequence):
