@@ -75,10 +75,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import lapack
 from threadpoolctl import threadpool_limits
 
 from planner.errors import GPDataError
+from planner.gp.data import check_hops, check_points
+from planner.gp.dense import rbf, spd_inverse
 from planner.gp.noise import TruncatedGaussianNoise
 
 N_ACTIONS = 8
@@ -236,47 +237,6 @@ class FitReport:
     offset_std: float = 0.0
 
 
-def _validate(
-    positions: np.ndarray, errors: np.ndarray, actions: np.ndarray, n_actions: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    pos = np.asarray(positions, dtype=np.float64)
-    err = np.asarray(errors, dtype=np.float64)
-    act = np.asarray(actions)
-    if pos.ndim != 2 or pos.shape[1] != 2:
-        raise GPDataError(f"positions must have shape (N, 2), got {pos.shape}")
-    if err.shape != pos.shape:
-        raise GPDataError(f"errors must have shape {pos.shape} like positions, got {err.shape}")
-    if act.shape != (pos.shape[0],):
-        raise GPDataError(f"actions must have shape ({pos.shape[0]},), got {act.shape}")
-    if act.size and (act.dtype.kind not in "iu" or act.min() < 0 or act.max() >= n_actions):
-        bad = np.flatnonzero((act < 0) | (act >= n_actions) | (act != np.round(act)))
-        row = int(bad[0]) if bad.size else 0
-        raise GPDataError(
-            f"actions must be integers in [0, {n_actions}), got {act[row]!r} in row {row}"
-        )
-    for name, arr in (("positions", pos), ("errors", err)):
-        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
-        if bad.size:
-            raise GPDataError(f"{name} has non-finite values in row {int(bad[0])}")
-    return pos, err, act.astype(np.int64)
-
-
-def _spd_inverse(a: np.ndarray) -> np.ndarray:
-    """Inverse of a symmetric positive definite matrix from its Cholesky factor (LAPACK)."""
-    chol, info = lapack.dpotrf(a, lower=True, clean=False)
-    if info != 0:
-        raise GPDataError(f"the data's covariance matrix is not positive definite (info {info})")
-    inv, info = lapack.dpotri(chol, lower=True)
-    if info != 0:
-        raise GPDataError(f"inverting the data's covariance matrix failed (info {info})")
-    return np.tril(inv) + np.tril(inv, -1).T
-
-
-def _sq_dist(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    d2 = (p * p).sum(1)[:, None] + (q * q).sum(1)[None, :] - 2.0 * p @ q.T
-    return np.maximum(d2, 0.0)
-
-
 @dataclass(frozen=True)
 class _Axis:
     """The posterior of one axis: ``alpha`` (n,), ``inv`` = C (n, n), noise per action."""
@@ -332,7 +292,7 @@ class LandingErrorGP:
         ``on_step(pass, mean_residual_var)`` is called after each pass of the residual
         estimate. With ``N = 0`` the model returns to its prior.
         """
-        pos, err, act = _validate(positions, errors, actions, self.n_actions)
+        pos, err, act = check_hops(positions, errors, actions, self.n_actions)
         with threadpool_limits(self.settings.num_threads, user_api="blas"):
             return self._fit(pos, err, act, on_step)
 
@@ -352,7 +312,7 @@ class LandingErrorGP:
             return self._report()
         order = np.argsort(act, kind="stable")
         pos, err, act = pos[order], err[order], act[order]
-        kx = np.exp(-0.5 * _sq_dist(pos, pos) / s.lengthscale**2)
+        kx = rbf(pos, pos, s.lengthscale)
         v0 = s.noise.std**2 + s.residual**2
         counts = np.bincount(act, minlength=self.n_actions)
         noise_var = v0.copy()
@@ -361,7 +321,7 @@ class LandingErrorGP:
             k = self._data_kernel(kx, act, d)
             y = err[:, d] - s.bias[act, d]
             for step in range(3):
-                inv = _spd_inverse(k + np.diag(noise_var[act, d]))
+                inv = spd_inverse(k + np.diag(noise_var[act, d]))
                 alpha = inv @ y
                 if step == 2:
                     break
@@ -395,14 +355,6 @@ class LandingErrorGP:
         """``(n_actions, 2)`` std of the residual ``r`` beyond the noise nu, metres."""
         return np.sqrt(np.maximum(self._noise_var - self.settings.noise.std**2, 0.0))
 
-    def _check_points(self, points: np.ndarray) -> np.ndarray:
-        pts = np.asarray(points, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            raise GPDataError(f"points must have shape (M, 2), got {pts.shape}")
-        if not np.isfinite(pts).all():
-            raise GPDataError("points has non-finite values")
-        return pts
-
     def _blocks(self) -> tuple[np.ndarray, np.ndarray]:
         a = np.arange(self.n_actions)
         return np.searchsorted(self._a, a), np.searchsorted(self._a, a, side="right")
@@ -414,7 +366,7 @@ class LandingErrorGP:
         The quadratic forms of the variance are computed in single precision (relative error
         about 1e-7 of the prior variance, i.e. below 1e-4 m of std), the rest in double.
         """
-        pts = self._check_points(points)
+        pts = check_points(points)
         s = self.settings
         m, na = pts.shape[0], self.n_actions
         prior_var = s.prior_var()
@@ -433,7 +385,7 @@ class LandingErrorGP:
         self, pts: np.ndarray, prior_var: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         s = self.settings
-        ks = np.exp(-0.5 * _sq_dist(pts, self._x) / s.lengthscale**2)  # (m, n)
+        ks = rbf(pts, self._x, s.lengthscale)  # (m, n)
         act = self._a
         starts, ends = self._blocks()
         present = np.flatnonzero(ends > starts)
@@ -481,7 +433,7 @@ class LandingErrorGP:
         ``e(x, a) - e(p, a)``, the posterior covariance is a kernel, so the std is an L2 norm
         and moves by at most the posterior std of the increment, at most ``rho``.
         """
-        pts = self._check_points(points)
+        pts = check_points(points)
         h = np.asarray(half_width, dtype=np.float64).reshape(-1)
         if h.shape != (2,) or not np.isfinite(h).all() or (h < 0).any():
             raise GPDataError(f"half_width must be 2 finite values >= 0, got {half_width!r}")
@@ -500,7 +452,7 @@ class LandingErrorGP:
         with threadpool_limits(s.num_threads, user_api="blas"):
             for lo in range(0, m, _CHUNK):
                 p = pts[lo : lo + _CHUNK]
-                ks = np.exp(-0.5 * _sq_dist(p, self._x) / s.lengthscale**2)
+                ks = rbf(p, self._x, s.lengthscale)
                 slope = np.zeros((len(p), self.n_actions, 2))
                 for j in range(2):
                     # d k / d p_j = -(p_j - x_ij) / l^2 k
