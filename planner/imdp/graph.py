@@ -110,11 +110,6 @@ def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
     return ~_row_any(model, leaves)
 
 
-def may_enter(model: IMDP, mask: np.ndarray) -> np.ndarray:
-    """Rows that may (``upper > 0``) move into ``mask``."""
-    return _row_any(model, (model.upper > 0) & mask[model.successor])
-
-
 def forced_into(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """Rows that put positive mass into ``mask`` under *every* adversary.
 
