@@ -94,25 +94,6 @@ def scratch(row_ptr):
     return np.empty(width, dtype=np.int64), np.empty(width)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def state_best(
-    lo: int, hi: int, row_ptr, remaining, succ, lower, gap, crit, v, sign, maximize, idx, keys
-):
-    """The strategy's best row among the rows ``lo:hi`` of a state: ``(value, row)``, the
-    value the max (``maximize``) or min of :func:`row_value` over them (the first row
-    attaining it)."""
-    best = -np.inf if maximize else np.inf
-    arg = lo
-    for r in range(lo, hi):
-        q = row_value(
-            row_ptr[r], row_ptr[r + 1], remaining[r], succ, lower, gap, v, sign, crit, r, idx, keys
-        )
-        if (q > best) if maximize else (q < best):
-            best = q
-            arg = r
-    return best, arg
-
-
 @numba.njit(cache=True, nogil=True)
 def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
     """The adversary's expectation of ``v`` for every row of the layout."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import all_row_values, gather_rows, scratch, state_best
+from planner.imdp.kernels.rows import all_row_values, gather_rows, row_value, scratch
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import row_entries
 
@@ -58,9 +58,26 @@ def gauss_seidel_sweep(
         else:
             lo = best_row[k]
             hi = lo + 1
-        best, arg = state_best(
-            lo, hi, row_ptr, remaining, succ, lower, gap, crit, v, sign, maximize, idx, keys
-        )
+        best = -np.inf if maximize else np.inf
+        arg = lo
+        for r in range(lo, hi):
+            q = row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                v,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if (q > best) if maximize else (q < best):
+                best = q
+                arg = r
         if full:
             best_row[k] = arg
         old = v[s]
@@ -109,21 +126,24 @@ def upper_sweep(
     violations = 0
     for k in range(states.size):
         s = states[k]
-        best, _ = state_best(
-            state_rows[k],
-            state_rows[k + 1],
-            row_ptr,
-            remaining,
-            succ,
-            lower,
-            gap,
-            crit,
-            u,
-            sign,
-            maximize,
-            idx,
-            keys,
-        )
+        best = -np.inf if maximize else np.inf
+        for r in range(state_rows[k], state_rows[k + 1]):
+            q = row_value(
+                row_ptr[r],
+                row_ptr[r + 1],
+                remaining[r],
+                succ,
+                lower,
+                gap,
+                u,
+                sign,
+                crit,
+                r,
+                idx,
+                keys,
+            )
+            if (q > best) if maximize else (q < best):
+                best = q
         old = u[s]
         if best <= old:
             u[s] = best
