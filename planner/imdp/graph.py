@@ -285,6 +285,7 @@ def end_component_labels(
     compiled: :func:`planner.imdp.kernels.maximal_end_components_kernel`)."""
     r = _all_rows(model, rows)
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
+    inc_ptr, inc_row, _, _ = model.incoming()
     return maximal_end_components_kernel(
         model.n_states,
         model.row_state,
@@ -292,6 +293,8 @@ def end_component_labels(
         model.successor,
         model.lower,
         model.upper,
+        inc_ptr,
+        inc_row,
         r,
         s,
         mode == "optimistic",

@@ -8,6 +8,7 @@ from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     backward_distance,
     counting_order,
+    incoming_index,
     prune_kernel,
     robust_attractor,
     rows_staying_in,
@@ -22,6 +23,7 @@ __all__ = [
     "counting_order",
     "gather_rows",
     "gauss_seidel_sweep",
+    "incoming_index",
     "maximal_end_components_kernel",
     "prune_kernel",
     "robust_attractor",

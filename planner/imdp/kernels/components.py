@@ -93,7 +93,18 @@ def _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic, 
 
 @numba.njit(cache=True, nogil=True)
 def maximal_end_components_kernel(
-    n, row_state, row_ptr, successor, lower, upper, rows_ok, states_ok, optimistic, limit
+    n,
+    row_state,
+    row_ptr,
+    successor,
+    lower,
+    upper,
+    inc_ptr,
+    inc_row,
+    rows_ok,
+    states_ok,
+    optimistic,
+    limit,
 ):
     """Maximal end components by iterated SCC decomposition (compiled).
 
@@ -105,6 +116,10 @@ def maximal_end_components_kernel(
     in a cascade through the incoming entries, the states left without rows and the rows
     that then leave; if anything was dropped, split the rest into its SCCs and refine
     those. Each round costs the size of the component it refines.
+
+    ``inc_ptr``/``inc_row``: the reverse index of the entries (the rows of the entries
+    into each state, :meth:`planner.imdp.model.IMDP.incoming`). Each state's successors
+    enter its SCC graph once (repeated successors of its rows are skipped).
 
     Returns ``(comp, rows)``: component label per state (-1: in none; labels are not
     consecutive) and the rows kept.
@@ -122,22 +137,6 @@ def maximal_end_components_kernel(
     for s in range(n):
         if alive[s] and n_live[s] == 0:
             alive[s] = False
-    # reverse index of the entries (incoming per state)
-    inc_ptr = np.zeros(n + 1, dtype=np.int64)
-    for e in range(successor.size):
-        inc_ptr[successor[e] + 1] += 1
-    for s in range(n):
-        inc_ptr[s + 1] += inc_ptr[s]
-    fill = inc_ptr[:-1].copy()
-    inc_row = np.empty(successor.size, dtype=np.int64)
-    erow = np.empty(successor.size, dtype=np.int64)
-    for r in range(n_rows):
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            erow[e] = r
-    for e in range(successor.size):
-        t = successor[e]
-        inc_row[fill[t]] = erow[e]
-        fill[t] += 1
     # rows of every state
     st_ptr = np.zeros(n + 1, dtype=np.int64)
     for r in range(n_rows):
@@ -167,6 +166,8 @@ def maximal_end_components_kernel(
         work[0] = 0
         top = 1
     local_index = np.full(n, -1, dtype=np.int64)
+    seen = np.full(n, -1, dtype=np.int64)  # the last member that listed a successor
+    tick = 0
     while top > 0:
         top -= 1
         c = work[top]
@@ -230,11 +231,13 @@ def maximal_end_components_kernel(
         deg = np.zeros(m + 1, dtype=np.int64)
         for i in range(m):
             s = members[i]
+            tick += 1
             for r in range(st_ptr[s], st_ptr[s + 1]):
                 if rows[r]:
                     for e in range(row_ptr[r], row_ptr[r + 1]):
                         t = successor[e]
-                        if upper[e] > 0.0 and alive[t] and comp[t] == c:
+                        if upper[e] > 0.0 and alive[t] and comp[t] == c and seen[t] != tick:
+                            seen[t] = tick
                             deg[i + 1] += 1
         for i in range(m):
             deg[i + 1] += deg[i]
@@ -242,11 +245,13 @@ def maximal_end_components_kernel(
         adj = np.empty(deg[m], dtype=np.int64)
         for i in range(m):
             s = members[i]
+            tick += 1
             for r in range(st_ptr[s], st_ptr[s + 1]):
                 if rows[r]:
                     for e in range(row_ptr[r], row_ptr[r + 1]):
                         t = successor[e]
-                        if upper[e] > 0.0 and alive[t] and comp[t] == c:
+                        if upper[e] > 0.0 and alive[t] and comp[t] == c and seen[t] != tick:
+                            seen[t] = tick
                             adj[pos[i]] = local_index[t]
                             pos[i] += 1
         sub = _tarjan(m, np.ones(m, dtype=np.bool_), deg, adj)

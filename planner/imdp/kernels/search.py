@@ -192,3 +192,26 @@ def prune_kernel(
                     queue[tail] = s
                     tail += 1
     return bad, rows
+
+
+@numba.njit(cache=True, nogil=True)
+def incoming_index(successor, entry_row, lower, upper, n_states):
+    """The reverse index of the entries, grouped by successor (stable): ``(ptr, rows,
+    lower, upper)``, positions ``ptr[s]:ptr[s + 1]`` for the entries into ``s`` (one
+    counting pass and one scattering pass over the entries, read in order)."""
+    ptr = np.zeros(n_states + 1, dtype=np.int64)
+    for t in successor:
+        ptr[t + 1] += 1
+    for i in range(n_states):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    rows = np.empty(successor.size, dtype=np.int64)
+    lo = np.empty(successor.size)
+    up = np.empty(successor.size)
+    for e in range(successor.size):
+        k = fill[successor[e]]
+        fill[successor[e]] = k + 1
+        rows[k] = entry_row[e]
+        lo[k] = lower[e]
+        up[k] = upper[e]
+    return ptr, rows, lo, up
