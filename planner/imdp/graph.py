@@ -340,8 +340,12 @@ def robust_buchi_region(
     rows = _all_rows(model, rows)
     good = np.asarray(good, dtype=bool)
     t = np.asarray(states, dtype=bool).copy()
+    none = np.zeros(model.n_states, dtype=bool)
     while True:
-        r = rows & t[model.row_state] & stays_in(model, t)
+        # the rows of T whose every possible successor lies in T
+        r = rows_staying_in(
+            t, rows, model.row_state, model.row_ptr, model.successor, model.upper, none
+        )
         w, _ = robust_almost_sure_reach(model, good & t & has_row(model, r), rows=r, region=t)
         if np.array_equal(w, t):
             return t, r
