@@ -110,11 +110,6 @@ def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
     return ~_row_any(model, leaves)
 
 
-def may_enter(model: IMDP, mask: np.ndarray) -> np.ndarray:
-    """Rows that may (``upper > 0``) move into ``mask``."""
-    return _row_any(model, (model.upper > 0) & mask[model.successor])
-
-
 def forced_into(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """Rows that put positive mass into ``mask`` under *every* adversary.
 
@@ -290,6 +285,7 @@ def end_component_labels(
     compiled: :func:`planner.imdp.kernels.maximal_end_components_kernel`)."""
     r = _all_rows(model, rows)
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
+    inc_ptr, inc_row, _, _ = model.incoming()
     return maximal_end_components_kernel(
         model.n_states,
         model.row_state,
@@ -297,6 +293,8 @@ def end_component_labels(
         model.successor,
         model.lower,
         model.upper,
+        inc_ptr,
+        inc_row,
         r,
         s,
         mode == "optimistic",
@@ -342,8 +340,12 @@ def robust_buchi_region(
     rows = _all_rows(model, rows)
     good = np.asarray(good, dtype=bool)
     t = np.asarray(states, dtype=bool).copy()
+    none = np.zeros(model.n_states, dtype=bool)
     while True:
-        r = rows & t[model.row_state] & stays_in(model, t)
+        # the rows of T whose every possible successor lies in T
+        r = rows_staying_in(
+            t, rows, model.row_state, model.row_ptr, model.successor, model.upper, none
+        )
         w, _ = robust_almost_sure_reach(model, good & t & has_row(model, r), rows=r, region=t)
         if np.array_equal(w, t):
             return t, r

@@ -317,10 +317,11 @@ class IMDP:
         order, so walking a state's predecessors reads memory sequentially; computed once,
         then cached)."""
         if self._incoming is None:
-            from planner.imdp.kernels import counting_order  # kernels import this module
+            from planner.imdp.kernels import incoming_index  # kernels import this module
 
-            entries, ptr = counting_order(self.successor, self.n_states)
-            view = (ptr, self.entry_row[entries], self.lower[entries], self.upper[entries])
+            view = incoming_index(
+                self.successor, self.entry_row, self.lower, self.upper, self.n_states
+            )
             for a in view:
                 a.setflags(write=False)
             self._incoming = view

@@ -122,12 +122,12 @@ def test_kernel_notice(capsys):
 FIRST_SYNTHESIS = """
 import numba
 import numpy as np
-from planner.imdp import kernels
+from planner.imdp.kernels import components, rows, search, sweeps
 from planner.warmup import compile_kernels
 
 def signatures():
-    return {n: len(d.signatures) for n, d in vars(kernels).items()
-            if isinstance(d, numba.core.registry.CPUDispatcher)}
+    return {f"{m.__name__}.{n}": len(d.signatures) for m in (components, rows, search, sweeps)
+            for n, d in vars(m).items() if isinstance(d, numba.core.registry.CPUDispatcher)}
 
 compile_kernels()
 before = signatures()

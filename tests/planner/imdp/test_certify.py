@@ -8,7 +8,7 @@ from planner.imdp.certify import EndComponentBounds
 from planner.imdp.kernels import ReachSweeper
 from tests.planner.imdp.reference import random_imdp, ref_reach
 
-solve_module = importlib.import_module("planner.imdp.solve")
+solve_module = importlib.import_module("planner.imdp.strategy")
 
 
 def loop_with_exit() -> IMDP:
@@ -28,7 +28,7 @@ def test_end_component_bound_closes_the_bracket_without_strategy_iteration(monke
     def no_si(*args, **kwargs):
         raise AssertionError("strategy iteration was not expected")
 
-    monkeypatch.setattr(solve_module, "_strategy_iteration", no_si)
+    monkeypatch.setattr(solve_module, "strategy_iteration", no_si)
     sol = solve(Problem(loop_with_exit(), Specification(ReachAvoid("goal"))))
     assert sol.converged and sol.error < 1e-8
     assert np.all(sol.lower[:2] <= 0.3 + 1e-15) and np.all(sol.upper[:2] >= 0.3 - 1e-15)

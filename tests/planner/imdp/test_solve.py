@@ -23,7 +23,7 @@ from tests.planner.imdp.reference import (
     slow_leak_imdp,
 )
 
-solve_module = importlib.import_module("planner.imdp.solve")
+solve_module = importlib.import_module("planner.imdp.reachability")
 
 
 def reach(m, target, avoid=None, sat="pessimistic", strategy="maximize", **kw):

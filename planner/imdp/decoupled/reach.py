@@ -1,0 +1,283 @@
+"""Reachability on a decoupled model: Gauss-Seidel sweeps with the exact operator from
+below, certified from above (a candidate checked superharmonic), strategy iteration, and the
+expanded interval MDP with the same values."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from planner.imdp.decoupled import operator
+from planner.imdp.decoupled.model import DecoupledIMDP
+from planner.imdp.evaluate import chain_reach
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.solve import Solution, ValueIteration
+
+
+def _backward_reach(model: DecoupledIMDP, target: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+    """Breadth-first distance to ``target`` over possible successors, not through
+    ``blocked`` states (``inf``: no path)."""
+    rows, succ = model.successors()
+    n = model.n_states
+    order = np.argsort(succ, kind="stable")
+    ptr = np.searchsorted(succ[order], np.arange(n + 1))
+    pred_state = model.row_state[rows[order]]
+    dist = np.full(n, np.inf)
+    frontier = np.flatnonzero(target)
+    dist[frontier] = 0.0
+    d = 0.0
+    while frontier.size:
+        d += 1.0
+        cand = np.concatenate([pred_state[ptr[t] : ptr[t + 1]] for t in frontier])
+        cand = np.unique(cand)
+        cand = cand[(dist[cand] == np.inf) & ~blocked[cand]]
+        dist[cand] = d
+        frontier = cand
+    return dist
+
+
+def _greedy_rows(
+    m: DecoupledIMDP, v: np.ndarray, pessimistic: bool, slack: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The first row per state whose robust value is within ``slack`` of the state's best,
+    and the robust values ``q`` of all rows."""
+    q = m.expectation(v, minimize=pessimistic)
+    best = np.maximum.reduceat(q, m.state_ptr[:-1])
+    top = np.flatnonzero(q >= best[m.row_state] - slack)
+    return top[first_of_runs(m.row_state[top])], q
+
+
+def solve_reach(
+    model: DecoupledIMDP,
+    target: np.ndarray,
+    avoid: np.ndarray | None = None,
+    pessimistic: bool = True,
+    algorithm: ValueIteration | None = None,
+) -> Solution:
+    """Maximal probability of ``(!avoid) U target`` (worst case unless not
+    ``pessimistic``) with its certified bracket (see the module docstring)."""
+    alg = ValueIteration() if algorithm is None else algorithm
+    m = model
+    n = m.n_states
+    target = np.asarray(target, dtype=bool)
+    avoid = np.zeros(n, bool) if avoid is None else np.asarray(avoid, bool) & ~target
+    dist = _backward_reach(m, target, avoid)
+    zero = ~np.isfinite(dist) | avoid
+    fixed = target | zero
+    v = np.where(target, 1.0, 0.0)
+    states = np.flatnonzero(~fixed)
+    states = states[np.lexsort((states, dist[states]))]
+    row_lo, row_hi = m.state_ptr[states], m.state_ptr[states + 1]
+    layout = m.layout
+
+    def sweep(x: np.ndarray, lower_side: bool) -> tuple[float, int]:
+        return operator.sweep(
+            states, row_lo, row_hi, x, lower_side, True, pessimistic, layout, m.width
+        )
+
+    it, residual, goal, upper, passes = 0, 0.0, alg.tolerance, None, 0
+    tries = 0
+    while states.size and it < alg.max_iterations:
+        it += 1
+        residual, _ = sweep(v, True)
+        if alg.callback is not None:
+            alg.callback(it, residual)
+        if residual >= goal:
+            continue
+        if not alg.certified:
+            break
+        u = v.copy()
+        u[states] = np.minimum(1.0, v[states] + alg.tolerance / 2)
+        last = None
+        for _ in range(8):
+            passes += 1
+            _, bad = sweep(u, False)
+            if bad == 0 or (last is not None and bad >= last):
+                break
+            last = bad
+        if bad == 0:
+            upper = u
+            break
+        tries += 1
+        if tries >= 6:
+            break
+        goal = max(goal / 8.0, 1e-15)
+    if upper is None:
+        upper = v.copy()
+        upper[states] = 1.0
+    top, q = _greedy_rows(m, v, pessimistic, 1e-12)
+    strategy = np.full(n, -1, dtype=np.int64)
+    strategy[m.row_state[top]] = m.row_action[top]
+    strategy[fixed] = -1
+    converged = (
+        bool(np.max(upper - v, initial=0.0) < alg.tolerance)
+        if alg.certified
+        else bool(residual < alg.tolerance)
+    )
+    return Solution(
+        values=v,
+        strategy=strategy,
+        residual=residual,
+        iterations=it,
+        converged=converged,
+        fixed=fixed,
+        lower=v.copy(),
+        upper=upper,
+        upper_sweeps=passes,
+        _q=lambda: q,
+    )
+
+
+def certify_candidate(
+    m: DecoupledIMDP,
+    states: np.ndarray,
+    lower: np.ndarray,
+    sol: Solution,
+    pessimistic: bool,
+    alg: ValueIteration,
+) -> Solution | None:
+    """The bracket ``[lower, min(1, lower + tolerance / 2)]`` if the upper end passes the
+    superharmonic check (:func:`_sweep` from above), else ``None``."""
+    order = states[np.lexsort((states,))]
+    row_lo, row_hi = m.state_ptr[order], m.state_ptr[order + 1]
+    u = lower.copy()
+    u[order] = np.minimum(1.0, lower[order] + alg.tolerance / 2)
+    for _ in range(8):
+        _, bad = operator.sweep(
+            order, row_lo, row_hi, u, False, True, pessimistic, m.layout, m.width
+        )
+        if bad == 0:
+            return Solution(
+                values=lower,
+                strategy=sol.strategy,
+                residual=sol.residual,
+                iterations=sol.iterations,
+                converged=bool(np.max(u - lower) < alg.tolerance),
+                evaluations=1,
+                fixed=sol.fixed,
+                lower=lower,
+                upper=u,
+                upper_sweeps=sol.upper_sweeps,
+            )
+    return None
+
+
+def expanded_size(model: DecoupledIMDP) -> int:
+    """Entries :func:`expanded_imdp` would have (vertex pairs times the pair supports)."""
+    m = model
+    (xp, _, xl, xu), (yp, _, yl, yu) = m.axes
+    rows = np.arange(m.n_rows, dtype=np.int64)
+    nx = np.diff(operator.vertices(xp, xl, xu, rows, m.tolerance)[0]) // np.diff(xp)
+    ny = np.diff(operator.vertices(yp, yl, yu, rows, m.tolerance)[0]) // np.diff(yp)
+    return int(np.sum(nx * ny * (1 + np.diff(xp) * np.diff(yp))))
+
+
+def expanded_imdp(model: DecoupledIMDP) -> tuple[IMDP, int]:
+    """An interval MDP with the same reachability values: every row leads, with intervals
+    ``[0, 1]``, to one auxiliary state per pair of per-axis vertices, which moves with that
+    pair's product distribution (point intervals). The adversary's choice of weights is a
+    choice among the vertex pairs (randomisation does not change reachability values), so
+    the values on the first ``n_states`` states are the decoupled model's. Returns
+    ``(model, n_states)``; the auxiliary states carry no labels."""
+    m = model
+    (xp, xb, xl, xu), (yp, yb, yl, yu) = m.axes
+    rows = np.arange(m.n_rows, dtype=np.int64)
+    xv_ptr, xv = operator.vertices(xp, xl, xu, rows, m.tolerance)
+    yv_ptr, yv = operator.vertices(yp, yl, yu, rows, m.tolerance)
+    n = m.n_states
+    s_out, a_out, t_out, p_out = [], [], [], []
+    aux = n
+    for r in range(m.n_rows):
+        bx, by = xb[xp[r] : xp[r + 1]], yb[yp[r] : yp[r + 1]]
+        vx = xv[xv_ptr[r] : xv_ptr[r + 1]].reshape(-1, bx.size)
+        vy = yv[yv_ptr[r] : yv_ptr[r + 1]].reshape(-1, by.size)
+        succ = m.maps[m.row_map[r]][np.ix_(bx, by)].ravel()
+        uniq, inv = np.unique(succ, return_inverse=True)
+        k = vx.shape[0] * vy.shape[0]
+        joint = (vx[:, None, :, None] * vy[None, :, None, :]).reshape(k, -1)
+        dist = np.zeros((k, uniq.size))
+        np.add.at(dist, (slice(None), inv), joint)
+        ids = np.arange(aux, aux + k)
+        aux += k
+        s_out.append(np.full(k, m.row_state[r]))
+        a_out.append(np.full(k, m.row_action[r]))
+        t_out.append(ids)
+        p_out.append(None)
+        for j in range(k):
+            keep = dist[j] > 0
+            s_out.append(np.full(keep.sum(), ids[j]))
+            a_out.append(np.zeros(keep.sum(), dtype=np.int64))
+            t_out.append(uniq[keep])
+            p_out.append(dist[j][keep])
+    lo = np.concatenate(
+        [np.zeros(t.size) if p is None else p for t, p in zip(t_out, p_out, strict=True)]
+    )
+    up = np.concatenate(
+        [np.ones(t.size) if p is None else p for t, p in zip(t_out, p_out, strict=True)]
+    )
+    labels = np.zeros((aux, len(m.propositions)), dtype=bool)
+    labels[:n] = m.label_matrix
+    out = IMDP(
+        aux,
+        np.concatenate(s_out),
+        np.concatenate(a_out),
+        np.concatenate(t_out),
+        lo,
+        up,
+        n_actions=m.n_actions,
+        labels=[tuple(np.array(m.propositions)[row]) for row in labels],
+        propositions=m.propositions,
+        initial=m.initial,
+        tolerance=max(m.tolerance, 1e-12),
+    )
+    return out, n
+
+
+def strategy_iteration(
+    model: DecoupledIMDP,
+    states: np.ndarray,
+    fixed_val: np.ndarray,
+    start: np.ndarray,
+    pessimistic: bool,
+    rounds: int = 50,
+) -> np.ndarray | None:
+    """Exact values of the reachability game on ``states`` (the others held at
+    ``fixed_val``) by strategy iteration (Hoffman-Karp): evaluate the strategy against the
+    adversary's best response (adversary policy iteration on the exact operator's choices,
+    each a sparse solve), switch rows that are strictly better, repeat. ``None`` when it
+    does not settle within ``rounds``. The values are those of the last strategy (a lower
+    bound of the value) and, when it settles, the value itself."""
+    m = model
+    layout = m.layout
+    x = np.asarray(start, dtype=np.float64).copy()
+    free = np.zeros(m.n_states, bool)
+    free[states] = True
+
+    def greedy(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _greedy_rows(m, values, pessimistic, 0.0)
+
+    choice, _ = greedy(x)
+    choice = choice[free[m.row_state[choice]]]
+    slack = 1e-13
+    for _ in range(rounds):
+        rows = choice
+        for _ in range(rounds):
+            r, t, p = operator.chosen_distributions(rows, x, pessimistic, layout, m.width)
+            mat = sp.csr_matrix((p, (r, t)), shape=(rows.size, m.n_states))
+            y = chain_reach(mat, m.row_state[rows], np.where(free, 0.0, fixed_val))
+            done = np.max(np.abs(y - x)) <= 1e-15
+            x = y
+            if done:
+                break
+        else:
+            return None
+        best, q = greedy(x)
+        best = best[free[m.row_state[best]]]
+        better = q[best] > q[rows] + slack
+        if not better.any():
+            return x
+        choice = np.where(better, best, rows)
+    return None
+
+
+# --------------------------------------------------------------------------- product

@@ -1,0 +1,185 @@
+"""Interval iteration with end-component bounds, for maximal reachability against a
+minimising adversary (:class:`planner.imdp.certify.EndComponentBounds`).
+
+Each round: a Gauss-Seidel sweep from below (all rows every ``FULL_EVERY``-th round, else
+the best rows), the lower bound raised to the best exit on the traversable end components,
+a Gauss-Seidel pass ``U = min(U, T(U))`` from above (all rows) and ``U`` lowered to the best
+exit on every end component. From ``U = 1`` both sides stay sound bounds in every round.
+Every ``_II_WINDOW`` rounds the states still moving from below, if at most
+``LOCAL_FRACTION`` of the free states, are solved by strategy iteration with the others
+held at ``L`` (sound, as in :mod:`planner.imdp.reachability`).
+
+When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a long
+time among states of nearly equal value: ``U`` creeps down at the rate of the circulation's
+leak), the states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration
+with the others held (when they are at most ``LOCAL_FRACTION`` of the free states;
+``_II_STALLS`` stalls with more end it): from below with ``L`` outside (a sound lower
+bound), and from above with ``U`` outside, *unlowered*: ``Y``. The candidate ``U`` with
+``min(U, max(Y, L) + tolerance / 4)`` on ``B`` is kept only if checking passes certify it
+superharmonic (:func:`planner.imdp.certify.check_upper`, violating states raised to their
+Bellman value until a pass finds none; then it bounds ``V*`` by Knaster-Tarski, however
+inexact ``Y`` was). At most ``_II_REPAIRS`` such repairs, none without
+``strategy_iteration``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.imdp import certify, strategy
+from planner.imdp.kernels import ReachSweeper
+from planner.imdp.model import IMDP
+from planner.imdp.problem import ValueIteration
+
+FULL_EVERY = 4
+"""Every this many sweeps (and after a sweep below the tolerance) all rows are evaluated."""
+
+LOCAL_FRACTION = 0.25
+"""Strategy iteration on the states still moving at a check when they are at most this
+fraction of the free states."""
+
+_II_WINDOW = 16
+"""Rounds of interval iteration over which the bracket must at least halve."""
+
+_II_REPAIRS = 3
+"""Strategy-iteration repairs of a stalled interval iteration."""
+
+_REPAIR_PASSES = 16
+"""Checking passes of a repaired upper candidate (violating states raised)."""
+
+_II_STALLS = 4
+"""Stalled windows with too many wide states before interval iteration gives up."""
+
+_CANDIDATE_SLACK = 1e-13
+"""The ``tol`` given to the strategy iteration of an upper candidate (switching slack
+``tol / 100``)."""
+
+
+class _IntervalIteration:
+    """The state of one interval iteration: ``v`` (lower), ``u`` (upper) and the counts."""
+
+    def __init__(self, m: IMDP, sweeper: ReachSweeper, v: np.ndarray, alg: ValueIteration):
+        self.m, self.sweeper, self.alg = m, sweeper, alg
+        st = sweeper.states
+        free = np.zeros(m.n_states, dtype=bool)
+        free[st] = True
+        self.bounds = certify.EndComponentBounds(m, sweeper, free)
+        self.v = v
+        self.u = v.copy()
+        self.u[st] = 1.0
+        self.bounds.deflate(self.u)
+        self.residual = np.inf
+        self.it = self.passes = self.evaluations = self.repairs = self.stalls = 0
+
+    def width(self) -> float:
+        st = self.sweeper.states
+        return float(np.max(self.u[st] - self.v[st]))
+
+    def round(self) -> float:
+        """One round: sweep and collapse from below, pass and deflate from above; the
+        width after it."""
+        self.it += 1
+        self.residual = self.sweeper.sweep(self.v, self.it % FULL_EVERY == 1)
+        if self.alg.callback is not None:
+            self.alg.callback(self.it, self.residual)
+        self.bounds.collapse(self.v)
+        self.sweeper.upper_pass(self.u)
+        self.passes += 1
+        self.bounds.deflate(self.u)
+        return self.width()
+
+    def _held_rows(self, states: np.ndarray) -> np.ndarray:
+        """The free rows at the (masked) ``states``, sorted."""
+        rows = self.sweeper.rows
+        return np.sort(rows[states[self.m.row_state[rows]]])
+
+    def raise_moving(self, before: np.ndarray) -> None:
+        """Strategy iteration on the states still moving from below, the others held at
+        their lower bounds (sound; as in :mod:`planner.imdp.reachability`)."""
+        v, tol = self.v, self.alg.tolerance
+        moving = v - before >= tol
+        if 0 < moving.sum() <= LOCAL_FRACTION * self.sweeper.states.size:
+            rows = self._held_rows(moving)
+            x, _, k = strategy.strategy_iteration(
+                self.m, rows, v, np.where(moving, 0.0, v), True, tol
+            )
+            self.evaluations += k
+            if x is not None:
+                self.v = np.maximum(v, x)
+
+    def repair(self, wide: np.ndarray) -> None:
+        """Strategy iteration on the ``wide`` states from below (sound) and from above (a
+        candidate), the candidate kept if checking passes certify it."""
+        self.repairs += 1
+        rows = self._held_rows(wide)
+        x, _, k = strategy.strategy_iteration(
+            self.m, rows, self.v, np.where(wide, 0.0, self.v), True, _CANDIDATE_SLACK
+        )
+        self.evaluations += k
+        if x is not None:
+            self.v = np.maximum(self.v, x)
+        # switching slack ~1e-15: a row left better than Y by more than tolerance / 4 times
+        # its mass leaving B would fail the check
+        u, v = self.u, self.v
+        y, _, k = strategy.strategy_iteration(
+            self.m, rows, u, np.where(wide, 0.0, u), True, _CANDIDATE_SLACK, sound=False
+        )
+        self.evaluations += k
+        if y is not None:
+            cand = u.copy()
+            cand[wide] = np.minimum(u[wide], np.maximum(y[wide], v[wide]) + self.alg.tolerance / 4)
+            ok, k = certify.check_upper(self.sweeper, cand, _REPAIR_PASSES, raise_violations=True)
+            self.passes += k
+            if ok:
+                self.u = np.minimum(u, cand)
+
+    def run(self) -> bool:
+        """Rounds until the bracket closes (``True``) or stalls for good (``False``)."""
+        alg, st = self.alg, self.sweeper.states
+        tol = alg.tolerance
+        checkpoint = np.inf
+        before = self.v.copy()
+        while self.it < alg.max_iterations:
+            width = self.round()
+            if width < tol:
+                # a last full sweep: its change is at most the width (L <= T(L) <= V* <= U)
+                self.it += 1
+                self.residual = self.sweeper.sweep(self.v, True)
+                return True
+            if self.it % _II_WINDOW:
+                continue
+            if alg.strategy_iteration:
+                self.raise_moving(before)
+                before = self.v.copy()
+            if width <= 0.5 * checkpoint:
+                checkpoint = width
+                continue
+            wide = np.zeros(self.m.n_states, dtype=bool)
+            wide[st[self.u[st] - self.v[st] >= tol / 2]] = True
+            if not alg.strategy_iteration or self.repairs >= _II_REPAIRS:
+                break
+            if self.stalls >= _II_STALLS:
+                break
+            if wide.sum() > LOCAL_FRACTION * st.size:
+                # too many states for a cheap repair: keep iterating for a while
+                self.stalls += 1
+                checkpoint = width
+                continue
+            self.repair(wide)
+            checkpoint = self.width()
+        return False
+
+
+def interval_iteration(
+    m: IMDP, sweeper: ReachSweeper, v: np.ndarray, alg: ValueIteration
+) -> tuple[np.ndarray, np.ndarray, float, int, int, bool, int]:
+    """Interval iteration from the lower bound ``v`` (updated in place) and ``U = 1`` (see
+    the module docstring).
+
+    Returns ``(lower, upper, residual, sweeps, upper_passes, done, evaluations)``:
+    ``done`` when ``max(U - L) < tolerance``, else the caller continues from ``L`` and
+    ``U`` with its other means.
+    """
+    ii = _IntervalIteration(m, sweeper, v, alg)
+    done = ii.run()
+    return ii.v, ii.u, ii.residual, ii.it, ii.passes, done, ii.evaluations

@@ -1,0 +1,32 @@
+"""Compiled (numba) kernels for the sequential parts of robust value iteration and of the
+graph analyses: the robust expectation of a row (:mod:`.rows`), Gauss-Seidel sweeps and
+their layout (:mod:`.sweeps`), end components (:mod:`.components`) and graph searches
+(:mod:`.search`)."""
+
+from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
+from planner.imdp.kernels.rows import all_row_values, gather_rows
+from planner.imdp.kernels.search import (
+    backward_distance,
+    counting_order,
+    incoming_index,
+    prune_kernel,
+    robust_attractor,
+    rows_staying_in,
+)
+from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep, upper_sweep
+
+__all__ = [
+    "ReachSweeper",
+    "all_row_values",
+    "backward_distance",
+    "component_exit_bound",
+    "counting_order",
+    "gather_rows",
+    "gauss_seidel_sweep",
+    "incoming_index",
+    "maximal_end_components_kernel",
+    "prune_kernel",
+    "robust_attractor",
+    "rows_staying_in",
+    "upper_sweep",
+]

@@ -1,0 +1,217 @@
+"""Graph searches over the rows of an interval MDP, compiled: the robust attractor, the
+rows that stay in a set, breadth-first distances, the pruning cascade of removed states, and
+a counting sort."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def robust_attractor(
+    start,
+    cand,
+    row_state,
+    row_ptr,
+    successor,
+    lower,
+    upper,
+    inc_ptr,
+    inc_row,
+    inc_lower,
+    inc_upper,
+    limit,
+):
+    """The robust attractor of ``start`` with the candidate rows ``cand`` (work list).
+
+    A state joins when one of its candidate rows puts positive mass into the set under
+    every adversary: an entry with ``lower > 0`` into the set, or an ``upper > 0`` entry
+    into it while the upper bounds of the entries outside sum to less than ``limit``
+    (``1 - tolerance``). Each state that joins updates only the rows with an entry into it,
+    so the whole attractor costs ``O(entries of the candidate rows + their incoming
+    lists)``. Returns ``(mask, choice)``: ``choice[s]`` is the row by which ``s`` joined
+    (-1 for ``start`` and outside); a joining row only counts states that joined before.
+    """
+    n_rows = row_ptr.size - 1
+    x = start.copy()
+    choice = np.full(x.size, -1, dtype=np.int64)
+    must = np.zeros(n_rows, dtype=np.bool_)
+    touches = np.zeros(n_rows, dtype=np.bool_)
+    outside_up = np.zeros(n_rows)
+    queue = np.empty(x.size, dtype=np.int64)
+    tail = 0
+    for r in range(n_rows):
+        if not cand[r]:
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if x[successor[e]]:
+                if lower[e] > 0.0:
+                    must[r] = True
+                if upper[e] > 0.0:
+                    touches[r] = True
+            else:
+                outside_up[r] += upper[e]
+    for r in range(n_rows):
+        s = row_state[r]
+        if cand[r] and not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+            x[s] = True
+            choice[s] = r
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if not cand[r]:
+                continue
+            if inc_lower[k] > 0.0:
+                must[r] = True
+            if inc_upper[k] > 0.0:
+                touches[r] = True
+            outside_up[r] -= inc_upper[k]
+            s = row_state[r]
+            if not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+                x[s] = True
+                choice[s] = r
+                queue[tail] = s
+                tail += 1
+    return x, choice
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
+    """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
+    successor lies in ``u``."""
+    n_rows = row_ptr.size - 1
+    out = np.zeros(n_rows, dtype=np.bool_)
+    for r in range(n_rows):
+        s = row_state[r]
+        if not rows[r] or not u[s] or exclude[s]:
+            continue
+        ok = True
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper[e] > 0.0 and not u[successor[e]]:
+                ok = False
+                break
+        out[r] = ok
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def counting_order(keys, n_keys):
+    """Stable order of ``keys`` (integers in ``[0, n_keys)``) by counting sort, and the
+    start of each key's run: ``(order, ptr)``."""
+    ptr = np.zeros(n_keys + 1, dtype=np.int64)
+    for k in keys:
+        ptr[k + 1] += 1
+    for i in range(n_keys):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    order = np.empty(keys.size, dtype=np.int64)
+    for i in range(keys.size):
+        k = keys[i]
+        order[fill[k]] = i
+        fill[k] += 1
+    return order, ptr
+
+
+@numba.njit(cache=True, nogil=True)
+def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper):
+    """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
+    entries of the rows in ``row_mask`` (``inf`` where no path)."""
+    dist = np.full(sources.size, np.inf)
+    queue = np.empty(sources.size, dtype=np.int64)
+    tail = 0
+    for s in range(sources.size):
+        if sources[s]:
+            dist[s] = 0.0
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if not row_mask[r] or inc_upper[k] <= 0.0:
+                continue
+            s = row_state[r]
+            if dist[s] == np.inf:
+                dist[s] = dist[t] + 1.0
+                queue[tail] = s
+                tail += 1
+    return dist
+
+
+@numba.njit(cache=True, nogil=True)
+def prune_kernel(
+    removed, rows_ok, row_state, row_ptr, successor, upper, inc_ptr, inc_row, inc_upper
+):
+    """Remove the rows that may (``upper > 0``) enter a removed state and the states left
+    without rows, in a cascade through the incoming entries (Jiang et al. 2023, Alg. 1):
+    ``(removed states, rows kept)``."""
+    n = removed.size
+    n_rows = row_ptr.size - 1
+    bad = removed.copy()
+    rows = rows_ok.copy()
+    live = np.zeros(n, dtype=np.int64)
+    for r in range(n_rows):
+        if not rows[r]:
+            continue
+        if bad[row_state[r]]:
+            rows[r] = False
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper[e] > 0.0 and bad[successor[e]]:
+                rows[r] = False
+                break
+        if rows[r]:
+            live[row_state[r]] += 1
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for s in range(n):
+        if not bad[s] and live[s] == 0:
+            bad[s] = True
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if rows[r] and inc_upper[k] > 0.0:
+                rows[r] = False
+                s = row_state[r]
+                live[s] -= 1
+                if live[s] == 0 and not bad[s]:
+                    bad[s] = True
+                    queue[tail] = s
+                    tail += 1
+    return bad, rows
+
+
+@numba.njit(cache=True, nogil=True)
+def incoming_index(successor, entry_row, lower, upper, n_states):
+    """The reverse index of the entries, grouped by successor (stable): ``(ptr, rows,
+    lower, upper)``, positions ``ptr[s]:ptr[s + 1]`` for the entries into ``s`` (one
+    counting pass and one scattering pass over the entries, read in order)."""
+    ptr = np.zeros(n_states + 1, dtype=np.int64)
+    for t in successor:
+        ptr[t + 1] += 1
+    for i in range(n_states):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    rows = np.empty(successor.size, dtype=np.int64)
+    lo = np.empty(successor.size)
+    up = np.empty(successor.size)
+    for e in range(successor.size):
+        k = fill[successor[e]]
+        fill[successor[e]] = k + 1
+        rows[k] = entry_row[e]
+        lo[k] = lower[e]
+        up[k] = upper[e]
+    return ptr, rows, lo, up

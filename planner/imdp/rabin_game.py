@@ -1,0 +1,262 @@
+"""The almost-sure winning region of a Rabin condition on an interval MDP, as a game:
+Zielonka's recursive algorithm on the condition's Zielonka tree, adapted to the interval
+game (step 1 of :mod:`planner.imdp.rabin`): the controller wins almost surely, the adversary
+plays for positive probability of losing."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from planner.imdp import graph
+from planner.imdp.kernels import counting_order, robust_attractor
+from planner.imdp.model import IMDP, first_of_runs
+
+
+@numba.njit(cache=True, nogil=True)
+def _adversary_attractor(
+    region, start, rows_ok, won, row_state, upper_eff, inc_ptr, inc_row, inc_upper, n_rows
+):
+    """States of ``region`` from which the adversary reaches ``start`` with positive
+    probability whatever the controller does: every available row has an allowed
+    ``upper > 0`` entry into the set (work list). ``won`` states (absorbing) join only if
+    in ``start``."""
+    n = region.size
+    member = start & region
+    count = np.zeros(n, dtype=np.int64)
+    flagged = np.zeros(n_rows, dtype=np.bool_)
+    for r in range(n_rows):
+        if rows_ok[r] and region[row_state[r]]:
+            count[row_state[r]] += 1
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for s in range(n):
+        if member[s]:
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            r = inc_row[k]
+            if flagged[r] or not rows_ok[r] or inc_upper[k] <= 0.0:
+                continue
+            s = row_state[r]
+            if not region[s]:
+                continue
+            flagged[r] = True
+            count[s] -= 1
+            if count[s] == 0 and not member[s] and not won[s]:
+                member[s] = True
+                queue[tail] = s
+                tail += 1
+    return member
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows_inside(region, rows_ok, row_state, row_ptr, successor, upper_eff):
+    """Available rows of ``region`` whose every allowed ``upper > 0`` entry stays in it."""
+    n_rows = row_ptr.size - 1
+    out = np.zeros(n_rows, dtype=np.bool_)
+    for r in range(n_rows):
+        if not rows_ok[r] or not region[row_state[r]]:
+            continue
+        ok = True
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if upper_eff[e] > 0.0 and not region[successor[e]]:
+                ok = False
+                break
+        out[r] = ok
+    return out
+
+
+class _Game:
+    """The interval game of a model with a Rabin condition: its arrays, the reverse index
+    of the entries, and the attractors of a sub-game ``(region, rows_ok, entry_ok)``.
+
+    A sub-game keeps a set of states, the rows available there and the entries allowed
+    in those rows; the invariant is that every available row's polytope restricted to its
+    allowed entries is non-empty (the ``lower > 0`` entries are allowed and the allowed
+    upper bounds sum to at least ``1 - tol``), so every run stays in the region.
+    """
+
+    def __init__(self, model: IMDP, good: np.ndarray, bad: np.ndarray) -> None:
+        self.m = model
+        self.good = np.asarray(good, dtype=bool).reshape(-1, model.n_states)
+        self.bad = np.asarray(bad, dtype=bool).reshape(-1, model.n_states)
+        # the model's reverse index (and, on demand, the entries' order in it)
+        self.inc_ptr, self.inc_row, _, _ = model.incoming()
+        self._order: np.ndarray | None = None
+        self.limit = 1.0 - model.tolerance
+
+    # -- colours
+    def accepting(self, region: np.ndarray, won: np.ndarray) -> bool:
+        if (won & region).any():
+            return True
+        g = (self.good & region).any(axis=1)
+        b = (self.bad & region).any(axis=1)
+        return bool((g & ~b).any())
+
+    def max_rejecting(self, region: np.ndarray, won: np.ndarray) -> np.ndarray:
+        """States of ``region`` whose colours lie in the largest rejecting colour subset
+        (unique: Rabin-rejecting sets are closed under union)."""
+        z = region & ~won
+        while True:
+            g = (self.good & z).any(axis=1)
+            b = (self.bad & z).any(axis=1)
+            sat = g & ~b
+            if not sat.any():
+                return z
+            z = z & ~self.good[sat].any(axis=0)
+
+    # -- attractors (``entry_ok=None``: every entry allowed)
+    def _eff(self, entry_ok: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Lower and upper bounds with the disallowed entries zeroed, in entry order and in
+        the reverse index's order."""
+        m = self.m
+        if entry_ok is None:
+            _, _, inc_lo, inc_up = m.incoming()
+            return m.lower, m.upper, inc_lo, inc_up
+        if self._order is None:
+            self._order, _ = counting_order(m.successor, m.n_states)
+        lo = np.where(entry_ok, m.lower, 0.0)
+        up = np.where(entry_ok, m.upper, 0.0)
+        return lo, up, lo[self._order], up[self._order]
+
+    def controller_attractor(
+        self, region, rows_ok, entry_ok, start
+    ) -> tuple[np.ndarray, np.ndarray]:
+        m = self.m
+        lo, up, inc_lo, inc_up = self._eff(entry_ok)
+        cand = rows_ok & region[m.row_state] & ~start[m.row_state]
+        x, choice = robust_attractor(
+            start & region,
+            cand,
+            m.row_state,
+            m.row_ptr,
+            m.successor,
+            lo,
+            up,
+            self.inc_ptr,
+            self.inc_row,
+            inc_lo,
+            inc_up,
+            self.limit,
+        )
+        return x & region, choice
+
+    def adversary_attractor(self, region, rows_ok, entry_ok, won, start) -> np.ndarray:
+        m = self.m
+        _, up, _, inc_up = self._eff(entry_ok)
+        return _adversary_attractor(
+            region,
+            start,
+            rows_ok,
+            won,
+            m.row_state,
+            up,
+            self.inc_ptr,
+            self.inc_row,
+            inc_up,
+            m.n_rows,
+        )
+
+    def closed_rows(self, region, rows_ok, entry_ok) -> np.ndarray:
+        m = self.m
+        _, up, _, _ = self._eff(entry_ok)
+        return _rows_inside(region, rows_ok, m.row_state, m.row_ptr, m.successor, up)
+
+    # -- Zielonka
+    def solve(
+        self,
+        region: np.ndarray,
+        rows_ok: np.ndarray,
+        entry_ok: np.ndarray,
+        won: np.ndarray,
+        strategy: np.ndarray,
+    ) -> np.ndarray:
+        """The controller's almost-sure winning region of the sub-game; writes a winning
+        row into ``strategy`` for its states."""
+        m = self.m
+        region = region.copy()
+        won = won & region
+        while region.any():
+            if self.accepting(region, won):
+                u = region & ~self.max_rejecting(region, won)
+                a, choice = self.controller_attractor(region, rows_ok, entry_ok, u)
+                h = region & ~a
+                if h.any():
+                    # the adversary can keep the run in h: restrict the entries to it
+                    rows_h = rows_ok & h[m.row_state]
+                    inside = h[m.successor] & rows_h[m.entry_row]
+                    entry_h = inside if entry_ok is None else entry_ok & inside
+                    w_h = self.solve(h, rows_h, entry_h, won & h, strategy)
+                else:
+                    w_h = h
+                if np.array_equal(w_h, h):
+                    att = a & ~u & (choice >= 0)
+                    strategy[att] = choice[att]
+                    rest = np.flatnonzero(u & ~won)
+                    if rest.size:
+                        avail = np.flatnonzero(rows_ok & u[m.row_state] & ~won[m.row_state])
+                        first = avail[first_of_runs(m.row_state[avail])]
+                        strategy[m.row_state[first]] = first
+                    return region
+                lose = self.adversary_attractor(region, rows_ok, entry_ok, won, h & ~w_h)
+                region &= ~lose
+                won &= region
+                rows_ok = self.closed_rows(region, rows_ok, entry_ok)
+                continue
+            grew = False
+            for i in range(self.good.shape[0]):
+                if not (self.good[i] & ~self.bad[i] & region).any():
+                    continue
+                bad = self.adversary_attractor(region, rows_ok, entry_ok, won, self.bad[i] & region)
+                y = region & ~bad
+                if not y.any():
+                    continue
+                rows_y = self.closed_rows(y, rows_ok, entry_ok)
+                w_y = self.solve(y, rows_y, entry_ok, won & y, strategy)
+                if w_y.any():
+                    won = won | w_y
+                    grew = True
+                    break
+            if not grew:
+                return np.zeros_like(region)
+        return region
+
+
+def almost_sure_region(
+    model: IMDP,
+    good: np.ndarray,
+    bad: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """States from which the controller satisfies the Rabin condition with probability 1
+    against every adversary, and a memoryless strategy that does.
+
+    Args:
+        model: the (product) interval MDP.
+        good, bad: ``(n_pairs, n_states)`` masks of the pairs' ``G_i`` and ``B_i``.
+        rows: optional row mask of the controller's allowed rows.
+
+    Returns:
+        ``(mask, row)``: the region and, per state of it, a row (-1 elsewhere).
+    """
+    m = model
+    game = _Game(m, good, bad)
+    rows_ok = np.ones(m.n_rows, dtype=bool) if rows is None else np.asarray(rows, bool).copy()
+    region = graph.has_row(m, rows_ok)
+    # states without an allowed row take no part (a run there is stopped: losing)
+    outside = ~region
+    if outside.any():
+        lose = game.adversary_attractor(
+            np.ones(m.n_states, bool), rows_ok, None, np.zeros(m.n_states, bool), outside
+        )
+        region &= ~lose
+    rows_ok = game.closed_rows(region, rows_ok, None)
+    strategy = np.full(m.n_states, -1, dtype=np.int64)
+    win = game.solve(region, rows_ok, None, np.zeros(m.n_states, bool), strategy)
+    strategy[~win] = -1
+    return win, strategy

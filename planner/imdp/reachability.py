@@ -1,0 +1,295 @@
+"""Reachability value iteration from below, and a certified upper bound.
+
+**From below**: state-by-state Gauss-Seidel sweeps. The free states are visited in order of
+their graph distance to the value-1 states (targets, and states of worst-case value 1),
+each update reading the values written before it in the same sweep
+(:class:`planner.imdp.kernels.ReachSweeper`, compiled), with the exact adversary for the
+current values and ``max(old, new)``. Starting from ``V_0 <= T(V_0)``, every update stays
+below the least fixed point and the values only increase, which is what makes zero lower
+bounds and end components safe. For a maximising strategy only every ``FULL_EVERY``-th
+sweep evaluates all rows (and records each state's best row); the sweeps between evaluate
+the recorded best rows only (modified policy iteration: each such update is at most the
+full one, so it stays sound; for a minimising strategy it would not be, and every sweep is
+full).
+
+**From above** (``certified``): the value is the *least* fixed point of the Bellman
+operator ``T`` (targets at 1), so by Knaster-Tarski every superharmonic ``U``
+(``T(U) <= U``) is an upper bound; no end-component analysis is needed to *check* one.
+Maximal reachability against a minimising adversary first runs interval iteration
+(:mod:`planner.imdp.interval`). Otherwise (or when that stalls), when a full sweep from
+below changes no value by the current goal (``tolerance`` at first), the candidate
+``U = min(1, L + tolerance / 2)`` is checked by passes of
+:func:`planner.imdp.kernels.upper_sweep` (optimistic value iteration, Hartmanns and
+Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` certifies ``U``.
+Candidates fail where the values from below still move (a slow leak, or mass that
+circulates long among free states): then, for maximal reachability on at most
+``_SI_MAX_STATES`` free states, strategy iteration makes the values exact (the least fixed
+point, at which the candidate passes), else the goal is divided by 8 and the sweeps
+continue. After ``_OVI_TRIES`` failures the upper bound is iterated from the trivial
+superharmonic ``U = 1`` instead, each pass again a sound upper bound (it may stall above the
+value inside end components that the opposing side can hold; the bracket then stays wide
+and ``converged`` is ``False``).
+
+**Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
+if few, are solved by strategy iteration with the others held; else, if the residuals
+extrapolate to more than ``max(4 k, 1000)`` further sweeps, strategy iteration runs on all
+free states (:mod:`planner.imdp.strategy`). Its values are a strategy's values, hence at
+most the least fixed point and ``<= T(V)``, so the sweeps continue from ``max(V,
+V_sigma)`` soundly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.imdp import certify, strategy
+from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
+from planner.imdp.kernels import ReachSweeper, backward_distance
+from planner.imdp.model import IMDP
+from planner.imdp.problem import ValueIteration
+
+_OVI_TRIES = 3
+"""Failed candidates before the upper bound is iterated from 1 instead."""
+
+_FALLBACK_PASSES = 50
+"""Passes of the upper bound from the last certified vector (or ``U = 1``) when no
+candidate closed the bracket (each pass keeps it certified)."""
+
+_CERTIFY_ROUNDS = 12
+"""Strategy-improvement rounds spent on making the values exact for the certificate."""
+
+_MIN_GOAL = 1e-15
+"""The smallest residual goal the sweeps from below are driven to."""
+
+_SI_MAX_STATES = 20_000
+"""Strategy iteration only for at most this many free states: its sparse LU solves can
+fill in badly on large unstructured graphs (a 3000-state random model: ~0.5 s each)."""
+
+_FIRST_EVALUATION = 16
+"""Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
+
+_CREEP_SWEEPS = 1000
+"""Projected sweeps to the tolerance beyond which value iteration counts as creeping."""
+
+
+def _creeping(history: list[tuple[int, float]], tol: float) -> bool:
+    """Whether, after ``k`` sweeps, the sweeps would take more than
+    ``max(4 k, _CREEP_SWEEPS)`` more sweeps to reach ``tol`` at the rate seen since sweep
+    ``k / 2`` (geometric extrapolation of the residuals, given as ``(sweep, residual)``).
+    Only decides *when* to run strategy iteration; the values are sound either
+    way."""
+    if len(history) < 2:
+        return False
+    k, now = history[-1]
+    earlier = [h for h in history[:-1] if h[0] <= k // 2] or history[:1]
+    k0, then = earlier[-1]
+    if now < tol:
+        return False
+    if now >= then:
+        return True
+    rate = (now / then) ** (1.0 / (k - k0))
+    return np.log(tol / now) / np.log(rate) > max(4 * k, _CREEP_SWEEPS)
+
+
+def layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
+    state to ``sources``; ``inf`` where there is no path."""
+    row_mask = np.zeros(m.n_rows, dtype=bool)
+    row_mask[free_rows] = True
+    ptr, inc_row, _, inc_upper = m.incoming()
+    return backward_distance(
+        np.asarray(sources, dtype=bool), row_mask, m.row_state, ptr, inc_row, inc_upper
+    )
+
+
+@dataclass
+class ReachResult:
+    """The outcome of :func:`reach_values`.
+
+    Attributes:
+        lower, upper: the bracket (``upper`` certified superharmonic when certified).
+        residual: the last sweep's change; iterations: sweeps from below.
+        sigma: the last strategy iteration's optimal strategy (one row per free state) or
+            ``None``.
+        evaluations: strategy evaluations; q: the robust value of every free row under
+            ``lower``; upper_sweeps: passes from above.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    residual: float
+    iterations: int
+    sigma: np.ndarray | None
+    evaluations: int
+    q: np.ndarray
+    upper_sweeps: int
+
+
+class _ReachSweeps:
+    """The state of one reachability iteration (see the module docstring)."""
+
+    def __init__(
+        self,
+        m: IMDP,
+        free_rows: np.ndarray,
+        fixed_val: np.ndarray,
+        adversary_minimizes: bool,
+        maximize: bool,
+        alg: ValueIteration,
+    ) -> None:
+        self.m, self.free_rows, self.fixed_val, self.alg = m, free_rows, fixed_val, alg
+        self.adversary_minimizes, self.maximize = adversary_minimizes, maximize
+        dist = layers(m, free_rows, fixed_val == 1.0)
+        self.sweeper = ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)
+        self.v = fixed_val.copy()
+        self.upper: np.ndarray | None = None
+        self.residual = 0.0
+        self.it = self.evaluations = self.upper_sweeps = self.tries = 0
+        self.n_free = self.sweeper.states.size
+        self.use_si = maximize and alg.strategy_iteration
+        self.next_eval = _FIRST_EVALUATION if self.use_si else alg.max_iterations
+        self.sigma: np.ndarray | None = None
+        self.history: list[tuple[int, float]] = []
+        self.goal = alg.tolerance
+        self.exacted = False
+
+    def result(self) -> ReachResult:
+        return ReachResult(
+            self.v,
+            self.upper,
+            self.residual,
+            self.it,
+            self.sigma,
+            self.evaluations,
+            self.sweeper.row_values(self.v),
+            self.upper_sweeps,
+        )
+
+    def interval_iteration(self) -> bool:
+        """Interval iteration first (certified maximal reachability against a minimising
+        adversary); whether it closed the bracket."""
+        v, self.upper, self.residual, self.it, self.upper_sweeps, done, self.evaluations = (
+            interval_iteration(self.m, self.sweeper, self.v, self.alg)
+        )
+        self.v = v
+        return done
+
+    def _strategy_iteration(self, rows, held, max_rounds=None, keep_sigma=False) -> None:
+        x, sigma, rounds = strategy.strategy_iteration(
+            self.m,
+            rows,
+            self.v,
+            held,
+            self.adversary_minimizes,
+            self.alg.tolerance,
+            max_rounds=max_rounds,
+        )
+        self.evaluations += rounds
+        if keep_sigma:
+            self.sigma = sigma
+        if x is not None:
+            self.v = np.maximum(self.v, x)
+
+    def candidate(self) -> tuple[np.ndarray | None, int]:
+        return certify.optimistic_candidate(self.sweeper, self.v, self.alg.tolerance / 2)
+
+    def try_certify(self) -> bool:
+        """After a full sweep below the goal: check the candidate ``L + tolerance / 2``
+        (once making the values exact by strategy iteration first if it fails); whether
+        to stop (certified, or out of tries)."""
+        u, passes = self.candidate()
+        self.upper_sweeps += passes
+        if u is None and self.use_si and not self.exacted and self.n_free <= _SI_MAX_STATES:
+            # make the values from below exact (the least fixed point), then check
+            self.exacted = True
+            before = self.v
+            self._strategy_iteration(
+                self.free_rows, self.fixed_val, max_rounds=_CERTIFY_ROUNDS, keep_sigma=True
+            )
+            if self.v is not before:
+                u, passes = self.candidate()
+                self.upper_sweeps += passes
+        if u is not None:
+            # the minimum of superharmonic vectors is superharmonic
+            self.upper = u if self.upper is None else np.minimum(self.upper, u)
+            if np.max(self.upper - self.v) < self.alg.tolerance:
+                return True
+        self.tries += 1
+        if self.tries >= _OVI_TRIES:
+            return True
+        self.goal = max(self.goal / 8.0, _MIN_GOAL)
+        return False
+
+    def check_progress(self, before: np.ndarray) -> None:
+        """At a check: strategy iteration on the states still moving (few of them) or, if
+        the sweeps creep, on all free states."""
+        self.next_eval *= 2
+        v, tol = self.v, self.alg.tolerance
+        moving = v - before >= tol
+        if 0 < moving.sum() <= LOCAL_FRACTION * self.n_free:
+            # the states still moving, with the others held at their current values
+            m, free_rows = self.m, self.free_rows
+            local_rows = free_rows[moving[m.row_state[free_rows]]]
+            self._strategy_iteration(local_rows, np.where(moving, 0.0, v))
+        elif self.n_free <= _SI_MAX_STATES and _creeping(self.history, tol):
+            self._strategy_iteration(self.free_rows, self.fixed_val, keep_sigma=True)
+
+    def sweeps(self) -> None:
+        """Sweeps from below with the certificate attempts and the creep checks."""
+        alg = self.alg
+        want_full = False
+        while self.it < alg.max_iterations:
+            self.it += 1
+            check = self.it > self.next_eval
+            # a light sweep (one row per state) is a lower bound only when maximising
+            full = want_full or check or not self.maximize or self.it % FULL_EVERY == 1
+            before = self.v.copy() if check else self.v
+            self.residual = self.sweeper.sweep(self.v, full)
+            if alg.callback is not None:
+                alg.callback(self.it, self.residual)
+            if full:
+                self.history.append((self.it, self.residual))
+            want_full = self.residual < self.goal
+            if want_full and full:
+                if not alg.certified or self.try_certify():
+                    break
+                want_full = False
+            if check:
+                self.check_progress(before)
+
+    def fallback(self) -> None:
+        """The upper bound from the last certified vector (or ``U = 1``) by passes, each
+        one a sound bound, while the bracket is open."""
+        if self.upper is None:
+            self.upper = self.fixed_val.copy()
+            self.upper[self.sweeper.states] = 1.0
+        if not self.alg.certified:
+            return
+        for _ in range(_FALLBACK_PASSES):
+            if np.max(self.upper - self.v) < self.alg.tolerance:
+                break
+            self.upper_sweeps += 1
+            self.sweeper.upper_pass(self.upper)
+
+
+def reach_values(
+    m: IMDP,
+    free_rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    maximize: bool,
+    alg: ValueIteration,
+) -> ReachResult:
+    """Reachability values of the free states by sweeps from below and a certified upper
+    bound (see the module docstring); ``fixed_val`` holds the settled states' values."""
+    if free_rows.size == 0:
+        v = fixed_val.copy()
+        return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0)
+    run = _ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+    if alg.certified and maximize and adversary_minimizes and run.interval_iteration():
+        return run.result()
+    run.sweeps()
+    run.fallback()
+    return run.result()

@@ -1,0 +1,134 @@
+"""Strategies of reachability and reward problems: robust strategy iteration for maximal
+reachability (exact evaluation against the adversary's best response, strict improvements)
+and the optimal rows or actions for given values."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.imdp import graph
+from planner.imdp.evaluate import strategy_reach_value
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.ordering import OrderingAdversary
+from planner.imdp.problem import DiscountedReward, ReachAvoid
+
+MAX_IMPROVEMENTS = 100
+"""Strategy improvement rounds per strategy iteration."""
+
+
+def strategy_iteration(
+    m: IMDP,
+    free_rows: np.ndarray,
+    v: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    tol: float,
+    max_rounds: int | None = None,
+    sound: bool = True,
+) -> tuple[np.ndarray | None, np.ndarray | None, int]:
+    """Robust strategy iteration for maximal reachability, started from the strategy
+    greedy for ``v``.
+
+    Returns ``(values, strategy, evaluations)``: ``V_sigma`` of the last strategy
+    evaluated (``None`` if the first evaluation gave up), that strategy (one row per free
+    state) if no state wanted to switch any more, else ``None``, and the number of
+    strategies evaluated.
+
+    Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
+    best response included) and switches a state to its best row only where that row's
+    robust value exceeds the current row's by more than ``tol / 100``. Because switches
+    are strict, ``V_sigma`` never decreases and no new end component can trap mass that
+    had a positive value; when no state switches, ``V_sigma`` is a fixed point of the
+    Bellman operator (within the slack) and, being a strategy's value, at most the least
+    fixed point: it *is* the least fixed point. With a cooperating adversary each round
+    evaluates the chain of ``sigma`` and the adversary greedy for the last values (a
+    lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
+    ``sound=False``: the evaluations are not lowered by their rounding bound (the values
+    are then a candidate, not a lower bound; see :func:`strategy_reach_value`).
+    """
+    rs = m.row_state[free_rows]
+    seg = first_of_runs(rs)
+    seg_id = np.cumsum(np.concatenate(([0], (rs[1:] != rs[:-1]).astype(np.int64))))
+    full = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
+    q = full.expectation(v)
+    choice = strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
+    sigma = choice[rs[seg]]
+    slack = tol * 1e-2
+    best: np.ndarray | None = None
+    limit = MAX_IMPROVEMENTS if max_rounds is None else max_rounds
+    for rounds in range(1, limit + 1):
+        start = v if best is None else best
+        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
+        if x is None:
+            return best, None, rounds
+        best = x if best is None else np.maximum(best, x)
+        q = full.expectation(x)
+        q_best = np.maximum.reduceat(q, seg)
+        q_sigma = q[np.searchsorted(free_rows, sigma)]
+        better = q_best > q_sigma + slack
+        if not better.any():
+            # a cooperating adversary is only evaluated for one order (a lower bound), so
+            # only the opposing adversary's case yields an exactly evaluated strategy
+            return best, (sigma if adversary_minimizes else None), rounds
+        top = np.flatnonzero(q >= q_best[seg_id])
+        top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
+        sigma = np.where(better, free_rows[top], sigma)
+    return best, None, limit
+
+
+def strategy_actions(
+    m: IMDP,
+    free_rows: np.ndarray,
+    q_free: np.ndarray,
+    seg: np.ndarray,
+    seg_states: np.ndarray,
+    v: np.ndarray,
+    maximize: bool,
+    prop: ReachAvoid | DiscountedReward,
+    tol: float,
+) -> np.ndarray:
+    """Memoryless strategy: an optimal action per free state (-1 elsewhere)."""
+    reach_max = isinstance(prop, ReachAvoid) and maximize
+    choice = strategy_rows(m, free_rows, q_free, seg, seg_states, v, maximize, reach_max, tol)
+    return np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
+
+
+def strategy_rows(
+    m: IMDP,
+    free_rows: np.ndarray,
+    q_free: np.ndarray,
+    seg: np.ndarray,
+    seg_states: np.ndarray,
+    v: np.ndarray,
+    maximize: bool,
+    reach_max: bool,
+    tol: float,
+) -> np.ndarray:
+    """An optimal row per free state (-1 elsewhere).
+
+    For maximal reachability, optimal rows are picked by a robust attractor from the
+    states already settled (value fixed, or 0), so the strategy cannot idle inside an end
+    component whose optimal rows all tie: each chosen row moves one layer closer with
+    positive probability under every adversary.
+    """
+    n = m.n_states
+    choice = np.full(n, -1, dtype=np.int64)
+    if free_rows.size == 0:
+        return choice
+    rs = m.row_state[free_rows]
+    best = (np.maximum if maximize else np.minimum).reduceat(q_free, seg)
+    best_of = np.zeros(n)
+    best_of[seg_states] = best
+    slack = max(10 * tol, 1e-12)
+    opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
+    first = opt_local[first_of_runs(rs[opt_local])]
+    choice[rs[first]] = free_rows[first]
+    if reach_max:
+        free = np.zeros(n, dtype=bool)
+        free[seg_states] = True
+        settled = ~free | (v <= 0)
+        cand = np.zeros(m.n_rows, dtype=bool)
+        cand[free_rows[opt_local]] = True
+        _, attr = graph._attractor(m, settled, cand)
+        choice = np.where((attr >= 0) & free, attr, choice)
+    return choice
