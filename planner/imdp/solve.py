@@ -216,6 +216,8 @@ class ValueIteration:
             *uncertified* mode: it stops on the residual alone, which does not bound the
             error (a slow leak can leave an error far above the residual); its ``upper``
             is then the trivial bound.
+        initial: discounted reward only: ``(n_states,)`` values to start the sweeps from
+            (a warm start; any start converges, the sweeps contract). Default 0.
     """
 
     tolerance: float = 1e-8
@@ -224,6 +226,7 @@ class ValueIteration:
     precompute: bool = True
     strategy_iteration: bool = True
     certified: bool = True
+    initial: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not self.tolerance > 0:
@@ -313,6 +316,8 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     prob1_choice = np.full(n, -1, dtype=np.int64)
     prob1 = np.zeros(n, dtype=bool)
     prop = spec.property
+    if isinstance(prop, ReachAvoid) and alg.initial is not None:
+        raise SpecificationError("initial values are for discounted reward (reachability from 0)")
     if isinstance(prop, ReachAvoid):
         target = resolve_states(m, prop.target, "target")
         avoid = (
@@ -367,7 +372,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         full = OrderingAdversary(
             m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
         )
-        v, residual, it = fixed_val.copy(), 0.0, 0
+        v, residual, it = _start(m, fixed, fixed_val, alg.initial), 0.0, 0
         factor = discount / (1.0 - discount)
         goal = alg.tolerance / (2.0 * factor) if alg.certified and factor > 0 else alg.tolerance
         while free_rows.size and it < alg.max_iterations:
@@ -417,6 +422,18 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         upper_sweeps=upper_sweeps,
         _q=all_q,
     )
+
+
+def _start(m: IMDP, fixed: np.ndarray, fixed_val: np.ndarray, initial: np.ndarray | None):
+    """The first iterate of the discounted sweeps: ``initial`` off the fixed states."""
+    if initial is None:
+        return fixed_val.copy()
+    start = np.asarray(initial, dtype=np.float64)
+    if start.shape != (m.n_states,) or not np.all(np.isfinite(start)):
+        raise SpecificationError(
+            f"initial values must be a finite array of shape ({m.n_states},), got {start.shape}"
+        )
+    return np.where(fixed, fixed_val, start)
 
 
 def _layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
