@@ -81,7 +81,7 @@ class World:
     @property
     def n_cells(self) -> int:
         """``nx * ny``; also the index of the ``out`` state."""
-        return self.nx * self.ny
+        return self.geometry.n_cells
 
     @cached_property
     def geometry(self) -> GridGeometry:

@@ -6,15 +6,8 @@ import numpy as np
 import pytest
 
 from planner.errors import QTableError, SpecificationError
-from planner.imdp import (
-    IMDP,
-    DiscountedReward,
-    Problem,
-    ReachAvoid,
-    Specification,
-    ValueIteration,
-    solve,
-)
+from planner.imdp import IMDP, DiscountedReward, Problem, Specification, ValueIteration, solve
+from planner.imdp.solve import ReachAvoid
 from planner.qlearning import (
     SEAL_KIND,
     GreedyQ,
