@@ -39,9 +39,7 @@ BUDGET_S = 1.0
 def case_a() -> tuple[GridWorld, np.ndarray, int]:
     """The shipped case (a): grid with labels, reward per grid state, start cell."""
     sc = load_scenario("a")
-    w = sc.world
-    grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
-    return grid, np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0), sc.start_cell
+    return GridWorld.from_scenario(sc), sc.state_rewards, sc.start_cell
 
 
 def until_automaton() -> RabinAutomaton:

@@ -47,7 +47,7 @@ def synthetic_run(n_hops: int, rng: np.random.Generator) -> list:
             HopEvent(
                 0, step, "exploration", "LTL", False, "E1", "E1", pos, target, landing, com,
                 np.array([*(0.5 * (pos + landing)), 0.0]), 0.2,
-                int(sc.world.cell_of(landing)), 0, 0.5, 1.0, total, 0.45 * s,
+                int(sc.world.geometry.locate(landing)), 0, 0.5, 1.0, total, 0.45 * s,
             )
         )  # fmt: skip
         pos = landing

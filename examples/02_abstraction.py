@@ -29,14 +29,12 @@ def product_of(scenario, grid, gp, noise):
     bounds = cell_error_bounds(gp, grid)
     intervals = transition_intervals(bounds, grid, noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[scenario.start_cell])
-    reward = np.append(np.asarray(scenario.reward_grid, float).ravel(), 0.0)
-    return ProductIMDP(model, translate(scenario.formula), reward), intervals
+    return ProductIMDP(model, translate(scenario.formula), scenario.state_rewards), intervals
 
 
 def main() -> None:
     sc = load_scenario("a")
-    w = sc.world
-    grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
+    grid = GridWorld.from_scenario(sc)
     noise = TruncatedGaussianNoise(0.1, 0.2)  # sigma, bound [m] (the MJCF's defaults)
 
     prior_settings = FitSettings(field_std=0.06, offset_std=0.25, bias_std=0.05, noise=noise)
@@ -47,7 +45,7 @@ def main() -> None:
     print(f"GP prior only: mean interval width {w0:.3f}, P_worst(start) {p0:.3f}")
 
     rng = np.random.default_rng(0)
-    x = rng.uniform(0.0, w.width, size=(400, 2))
+    x = rng.uniform(0.0, sc.world.width, size=(400, 2))
     actions = rng.integers(0, 8, size=400)  # N1, N2, E1, E2, S1, S2, W1, W2
     push = np.array([0.2, -0.1])  # metres, the same everywhere
     error = push + 0.05 * np.stack([np.sin(x[:, 1] / 3.0), np.cos(x[:, 0] / 4.0)], axis=1)

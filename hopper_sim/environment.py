@@ -51,7 +51,7 @@ from hopper_sim.hop import HopResult, simulate_hop
 from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
 from hopper_sim.terrain import TerrainField
-from planner.imdp.grid import ACTION_OFFSETS, ACTIONS, GridWorld
+from planner.imdp.grid import ACTIONS, GridWorld
 from planner.scenario import Scenario, load_scenario
 
 try:  # the optional `gym` extra
@@ -167,14 +167,13 @@ class HopperGridEnv(_EnvBase):
             ckpt = load_checkpoint(expected_param_hash=self.model.param_hash())
             controller = LegAngleController.from_checkpoint(ckpt)
         self.controller = controller
-        w = scenario.world
-        self.grid = GridWorld(w.nx, w.ny, w.cell, scenario.cell_labels, scenario.hazard)
+        self.grid = GridWorld.from_scenario(scenario)
         self.terrain = (
             TerrainField.for_model(self.model, self.settings.terrain_seed)
             if self.settings.terrain
             else None
         )
-        self.reward_table = np.append(np.asarray(scenario.reward_grid, float).ravel(), 0.0)
+        self.reward_table = scenario.state_rewards
         self.hazard_cells = self.grid.label_mask(scenario.hazard)
         self.collected = np.zeros(self.grid.n_states, dtype=bool)
         """Cells landed in during this episode (the start cell is not a landing)."""
@@ -185,12 +184,6 @@ class HopperGridEnv(_EnvBase):
         self._steps = 0
         self.pos = np.zeros(2)
         self.vel = np.zeros(3)
-        # target centre of every action from every cell, also of those leaving the world
-        i, j = np.divmod(np.arange(self.grid.n_cells), self.grid.ny)
-        offsets = np.asarray(ACTION_OFFSETS, dtype=float)
-        self._target_centres = (
-            np.stack([i, j], axis=-1)[:, None, :].astype(float) + offsets[None] + 0.5
-        ) * self.grid.cell
         self.action_space = None
         self.observation_space = None
         if spaces is not None:
@@ -260,7 +253,7 @@ class HopperGridEnv(_EnvBase):
     def targets(self, cell: int, actions: np.ndarray) -> np.ndarray:
         """Target positions (world m) of ``actions`` from ``cell``, ``(len(actions), 2)``
         (also of actions whose target lies outside the world)."""
-        return self._target_centres[cell, np.asarray(actions, dtype=int)]
+        return self.grid.hop_target_centres[cell, np.asarray(actions, dtype=int)]
 
     def step(
         self, action: int, allowed: np.ndarray | None = None

@@ -358,7 +358,7 @@ class RerunRecorder(Observer):
         rec.log(
             "world/grid", rr.LineStrips3D(strips, colors=[GRID_COLOR], radii=[0.004]), static=True
         )
-        centers = w.cell_centers().reshape(w.nx, w.ny, 2)
+        centers = w.geometry.centres().reshape(w.nx, w.ny, 2)
         half = [0.5 * w.cell, 0.5 * w.cell, 0.005]
 
         def boxes(mask: np.ndarray, color) -> rr.Boxes3D:

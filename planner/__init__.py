@@ -26,11 +26,12 @@ from hopnav import __version__
 _EXPORTS: dict[str, str] = {
     # scenarios
     "Scenario": "planner.scenario",
-    "World": "planner.scenario",
-    "Region": "planner.scenario",
+    "World": "planner.world",
+    "Region": "planner.world",
+    "GridGeometry": "planner.geometry",
     "RunnerParams": "planner.scenario",
-    "load_scenario": "planner.scenario",
-    "parse_scenario": "planner.scenario",
+    "load_scenario": "planner.scenario_file",
+    "parse_scenario": "planner.scenario_file",
     # LTL and automata
     "RabinAutomaton": "planner.automaton",
     "RabinPair": "planner.automaton",

@@ -9,8 +9,9 @@ bounds ``l <= p <= u`` the robust Q-value is the worst case over the interval po
 The minimum is evaluated by :class:`planner.imdp.OrderingAdversary` (Lahijanian et al. 2015),
 so the values are lower bounds on the reward of every distribution inside the intervals.
 
-* Known ``W``: :func:`robust_q_iteration` iterates the equations to a fixed point (a
-  contraction with factor ``gamma``: error ``<= gamma / (1 - gamma) * residual``).
+* Known ``W``: :func:`robust_q_iteration` solves the equations by the discounted-reward
+  value iteration of :func:`planner.imdp.solve` (a contraction with factor ``gamma``: error
+  ``<= gamma / (1 - gamma) * residual``) and returns the Q-values of every row.
 * Unknown ``W``: :class:`RobustQLearner` learns the reward of a cell from visits (the mean of
   the rewards observed on landing there; unvisited cells carry ``prior_reward``, 0 by default;
   where a cell pays only on its first landing of a run the caller observes only those
@@ -48,7 +49,15 @@ import numpy as np
 from planner._util.atomic import atomic_write
 from planner._util.sealed import SealError, read_limited, seal, unseal
 from planner.errors import QTableError
-from planner.imdp import IMDP, OrderingAdversary
+from planner.imdp import (
+    IMDP,
+    DiscountedReward,
+    OrderingAdversary,
+    Problem,
+    Specification,
+    ValueIteration,
+    solve,
+)
 
 FORMAT_TAG = "hopnav-robust-q"
 FORMAT_VERSION = 1
@@ -139,9 +148,8 @@ def robust_q_iteration(
     adv = adversary if adversary is not None else OrderingAdversary(model, minimize=True)
     if adv.model is not model or not adv.minimize:
         raise QTableError("adversary must be a minimising OrderingAdversary of this model")
-    if initial is None:
-        v = np.zeros(model.n_states)
-    else:
+    v0 = None
+    if initial is not None:
         init = np.asarray(initial, dtype=np.float64)
         if init.shape != (model.n_states, model.n_actions):
             raise QTableError(
@@ -149,22 +157,16 @@ def robust_q_iteration(
                 f"got {init.shape}"
             )
         q0 = init[model.row_state, model.row_action]
-        v = _state_values(model, np.nan_to_num(q0, nan=-np.inf), rows)
-    residual = np.inf
-    it = 0
-    q_rows = np.zeros(model.n_rows)
-    while it < max_iterations:
-        it += 1
-        q_rows = adv.expectation(w + discount * v)
-        v_new = _state_values(model, q_rows, rows)
-        residual = float(np.max(np.abs(v_new - v))) if v.size else 0.0
-        v = v_new
-        if callback is not None:
-            callback(it, residual)
-        if residual < tolerance:
-            break
-    q_rows = adv.expectation(w + discount * v)
-    return QSolution(_rows_to_table(model, q_rows), v, residual, it, residual < tolerance)
+        v0 = _state_values(model, np.nan_to_num(q0, nan=-np.inf), rows)
+    spec = Specification(DiscountedReward(w, discount))
+    sol = solve(
+        Problem(model, spec, None if allowed is None else np.asarray(allowed)),
+        ValueIteration(tolerance, max_iterations, callback, certified=False, initial=v0),
+    )
+    q_rows = adv.expectation(w + discount * sol.values)
+    return QSolution(
+        _rows_to_table(model, q_rows), sol.values, sol.residual, sol.iterations, sol.converged
+    )
 
 
 TIE_TOLERANCE = 1e-6

@@ -1,110 +1,67 @@
 """Case-study scenarios: a labelled grid world, an LTL task, rewards and runner settings.
 
-A :class:`Scenario` is pure data, validated when it is built. The world is ``width x height``
-metres with its origin at the lower-left corner, split into ``nx x ny`` square cells of side
-``cell`` metres; cell ``(i, j)`` covers ``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)`` and has
-the flat index ``i * ny + j``. The absorbing ``out`` state (a landing outside the world) has
-index ``nx * ny`` and carries the hazard label.
+A :class:`Scenario` is pure data, validated when it is built. Its world is a rectangle of
+square cells (:mod:`planner.world`, indices in :mod:`planner.geometry`); the absorbing
+``out`` state (a landing outside the world) has index ``nx * ny`` and carries the hazard
+label. Each region's name is a label (an atomic proposition of the formula); a cell can carry
+several labels. The reward ``W`` of a cell is the sum of the rewards of its labels (labels
+without a reward give 0). ``collect`` says when it is paid: ``"once"`` (default) on the first
+landing in the cell during a run, ``"every"`` on every landing (:data:`COLLECT_MODES`).
 
-A region is a union of axis-aligned rectangles ``[x0, y0, x1, y1]`` in world metres and of
-single cells ``[i, j]``. A rectangle covers the cells whose centres lie in
-``[x0, x1) x [y0, y1)``; a cell-aligned rectangle therefore covers exactly the cells inside it.
-Each region's name is a label (an atomic proposition of the formula); a cell can carry several
-labels. The reward ``W`` of a cell is the sum of the rewards of its labels (labels without a
-reward give 0). ``collect`` says when it is paid: ``"once"`` (default) on the first landing in
-the cell during a run, ``"every"`` on every landing (:data:`COLLECT_MODES`).
-
-Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case study by name,
-``a`` to ``d``) and reports problems with the key and the line. The format::
-
-    name = "a"                      # required
-    description = "..."             # optional
-    formula = "!Haz U Goal"         # LTL over the labels (default shown)
-    hazard = "Haz"                  # the label of hazards and of the out state (default)
-    goal = "Goal"                   # the goal label, kept apart from the hazard (default)
-    p_sat = 0.65                    # switch to goal reaching above this probability
-    reward_known = true             # false: rewards are learned from visits
-    collect = "once"                # "once": a cell pays on its first landing of a run;
-                                    # "every": on every landing
-
-    [world]
-    size = [15.0, 15.0]             # metres (width, height), required
-    cell = 1.0                      # metres
-
-    [initial]                       # the initial region and the start position
-    rects = [[1.0, 6.0, 3.0, 9.0]]
-    start = [1.5, 7.5]              # metres, required
-
-    [regions.Goal]                  # one table per label
-    rects = [[13.0, 6.0, 15.0, 9.0]]
-    cells = [[12, 7]]
-
-    [rewards]                       # per label, collected on landing
-    A = 20.0
-
-    [runner]                        # all optional; defaults in RunnerParams
-    batch_size = 50
+Scenario files (TOML) and the shipped case studies are read by :mod:`planner.scenario_file`
+(:func:`load_scenario`, :func:`parse_scenario`; also importable from here).
 """
 
 from __future__ import annotations
 
 import difflib
+import importlib
 import math
 import re
-import sys
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
-from importlib import resources
-from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from planner._util.textfile import read_text
-from planner._util.toml_lines import key_lines, line_of, nesting_depth
 from planner.errors import (
     LTLSyntaxError,
-    MissingKeyError,
     RegionOutsideWorldError,
     RegionOverlapError,
-    ScenarioError,
     ScenarioFormulaError,
-    ScenarioSyntaxError,
-    ScenarioTypeError,
     ScenarioValueError,
     StartInHazardError,
     UndefinedLabelError,
-    UnknownKeyError,
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
+from planner.world import MAX_CELLS, Cell, Rect, Region, World
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-SHIPPED_SCENARIOS: tuple[str, ...] = ("a", "b", "c", "d")
-"""Names of the case studies shipped as package data (``planner/scenarios/<name>.toml``)."""
+__all__ = [
+    "COLLECT_MODES",
+    "DEFAULT_FORMULA",
+    "MAX_CELLS",
+    "Cell",
+    "Rect",
+    "Region",
+    "RunnerParams",
+    "Scenario",
+    "World",
+    "ascii_map",
+]
 
 DEFAULT_FORMULA = "!Haz U Goal"
 
-#: Limits of a scenario, checked before anything of that size is built: cells of the grid,
-#: labelled regions, rectangles and cells listed per region, the magnitude of a cell's
-#: reward, propositions of the formula (the letters 2^n of its automaton), nesting depth
-#: of the TOML and the size of the file. The transition intervals of a synthesis are dense
-#: (rows x cells, :func:`planner.intervals.transition_intervals`), so memory grows with the
-#: square of the cells: ``imdp export --scenario`` of 45 x 45 cells took 1.2 GB, of 64 x 64
-#: 3.6 GB, of 256 x 256 it asked for 254 GiB.
-MAX_CELLS = 1 << 11
+#: Limits of a scenario, checked before anything of that size is built: labelled regions,
+#: rectangles and cells listed per region, the magnitude of a cell's reward, propositions of
+#: the formula (the letters 2^n of its automaton). The cells of the grid: :data:`MAX_CELLS`;
+#: the file: :mod:`planner.scenario_file`.
 MAX_REGIONS = 64
 MAX_REGION_ITEMS = 4096
 MAX_REWARD = 1.0e6
 MAX_PROPOSITIONS = 16
-MAX_TOML_DEPTH = 32
-MAX_FILE_BYTES = 1 << 20
 
 COLLECT_MODES: tuple[str, ...] = ("once", "every")
 """When a cell's reward is paid: on the first landing in it during a run, or on every landing."""
@@ -119,109 +76,6 @@ def _is_proposition(label: str) -> bool:
         return parse(label).propositions() == {label}
     except LTLSyntaxError:
         return False
-
-
-Rect = tuple[float, float, float, float]
-Cell = tuple[int, int]
-
-
-@dataclass(frozen=True)
-class World:
-    """A rectangle ``[0, width) x [0, height)`` in metres, split into square cells.
-
-    Raises:
-        ScenarioValueError: on a non-positive size or cell, or a size that is not a whole
-            number of cells.
-    """
-
-    width: float
-    height: float
-    cell: float = 1.0
-
-    def __post_init__(self) -> None:
-        for name in ("width", "height", "cell"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                key = "world.cell" if name == "cell" else "world.size"
-                raise ScenarioValueError(
-                    f"{name} must be positive and finite, got {value}", key=key
-                )
-        cells = (self.width / self.cell) * (self.height / self.cell)
-        if not cells <= MAX_CELLS:
-            raise ScenarioValueError(
-                f"a {self.width} x {self.height} m world of {self.cell} m cells has {cells:.4g} "
-                f"cells, more than the limit of {MAX_CELLS}",
-                key="world.size",
-            )
-        for name in ("width", "height"):
-            n = getattr(self, name) / self.cell
-            if abs(n - round(n)) > 1e-9 * max(1.0, n):
-                raise ScenarioValueError(
-                    f"{name} {getattr(self, name)} m is not a whole number of {self.cell} m cells",
-                    key="world.size",
-                )
-
-    @property
-    def nx(self) -> int:
-        """Number of cells along x."""
-        return round(self.width / self.cell)
-
-    @property
-    def ny(self) -> int:
-        """Number of cells along y."""
-        return round(self.height / self.cell)
-
-    @property
-    def n_cells(self) -> int:
-        """``nx * ny``; also the index of the ``out`` state."""
-        return self.nx * self.ny
-
-    def cell_of(self, xy: np.ndarray | Sequence[float]) -> np.ndarray:
-        """Flat cell index of each point ``(..., 2)`` in metres; ``n_cells`` when outside."""
-        p = np.asarray(xy, dtype=float)
-        ij = np.floor(p / self.cell).astype(np.int64)
-        inside = (
-            (p[..., 0] >= 0)
-            & (p[..., 0] < self.width)
-            & (p[..., 1] >= 0)
-            & (p[..., 1] < self.height)
-            & (ij[..., 0] < self.nx)
-            & (ij[..., 1] < self.ny)
-        )
-        return np.where(inside, ij[..., 0] * self.ny + ij[..., 1], self.n_cells)
-
-    def cell_centers(self) -> np.ndarray:
-        """Centres of all cells in metres, shape ``(n_cells, 2)``, flat-index order."""
-        i, j = np.meshgrid(np.arange(self.nx), np.arange(self.ny), indexing="ij")
-        return (np.stack([i.ravel(), j.ravel()], axis=1) + 0.5) * self.cell
-
-
-@dataclass(frozen=True)
-class Region:
-    """A union of rectangles ``(x0, y0, x1, y1)`` in metres and of cells ``(i, j)``."""
-
-    rects: tuple[Rect, ...] = ()
-    cells: tuple[Cell, ...] = ()
-
-    def mask(self, world: World) -> np.ndarray:
-        """Boolean ``(nx, ny)`` array of the covered cells (no bounds checks; see Scenario)."""
-        centers = world.cell_centers().reshape(world.nx, world.ny, 2)
-        out = np.zeros((world.nx, world.ny), dtype=bool)
-        if self.rects:
-            r = np.asarray(self.rects, dtype=float)  # (R, 4)
-            x = centers[None, :, :, 0]
-            y = centers[None, :, :, 1]
-            inside = (
-                (x >= r[:, 0, None, None])
-                & (x < r[:, 2, None, None])
-                & (y >= r[:, 1, None, None])
-                & (y < r[:, 3, None, None])
-            )
-            out |= inside.any(axis=0)
-        if self.cells:
-            c = np.asarray(self.cells, dtype=np.int64)
-            out[c[:, 0], c[:, 1]] = True
-        return out
 
 
 @dataclass(frozen=True)
@@ -517,10 +371,18 @@ class Scenario:
         grid.flags.writeable = False
         return grid
 
+    @cached_property
+    def state_rewards(self) -> np.ndarray:
+        """:attr:`reward_grid` in flat cell order followed by the ``out`` state's 0,
+        ``(nx * ny + 1,)`` float (the reward ``W`` per state of the abstraction)."""
+        w = np.append(np.asarray(self.reward_grid, dtype=float).ravel(), 0.0)
+        w.flags.writeable = False
+        return w
+
     @property
     def start_cell(self) -> int:
         """Flat index of the cell holding :attr:`start`."""
-        return int(self.world.cell_of(self.start))
+        return int(self.world.geometry.locate(self.start))
 
     @property
     def goal_mask(self) -> np.ndarray:
@@ -536,240 +398,24 @@ def _scenario_from_kwargs(kwargs: dict[str, Any]) -> Scenario:
     return Scenario(**kwargs)
 
 
-# --------------------------------------------------------------------------- loading
-
-_TOP_KEYS = {
-    "name",
-    "description",
-    "formula",
-    "hazard",
-    "goal",
-    "p_sat",
-    "reward_known",
-    "collect",
-    "world",
-    "initial",
-    "regions",
-    "rewards",
-    "runner",
-}
-_RUNNER_TYPES: dict[str, type] = {f.name: f.type for f in fields(RunnerParams)}  # type: ignore[misc]
+#: Names served by :mod:`planner.scenario_file` (which imports this module).
+_FILE_NAMES = frozenset(
+    {
+        "SHIPPED_SCENARIOS",
+        "MAX_FILE_BYTES",
+        "MAX_TOML_DEPTH",
+        "load_scenario",
+        "parse_scenario",
+        "resolve_scenario_path",
+        "scenario_from_dict",
+    }
+)
 
 
-class _Reader:
-    """Typed access to the parsed TOML, raising errors that carry key paths."""
-
-    def __init__(self, data: dict[str, Any]) -> None:
-        self.data = data
-
-    @staticmethod
-    def _type_name(value: Any) -> str:
-        return {bool: "boolean", int: "integer", float: "float", str: "string"}.get(
-            type(value), type(value).__name__
-        )
-
-    def table(self, parent: dict[str, Any], key: str, path: str, required: bool) -> dict:
-        if key not in parent:
-            if required:
-                where = f"table [{path.rpartition('.')[0]}]" if "." in path else "top-level table"
-                raise MissingKeyError(f"missing required key (in the {where})", key=path)
-            return {}
-        value = parent[key]
-        if not isinstance(value, dict):
-            raise ScenarioTypeError(f"must be a table, got {self._type_name(value)}", key=path)
-        return value
-
-    def scalar(
-        self, parent: dict, key: str, path: str, kind: str, default: Any = ..., required=False
-    ) -> Any:
-        if key not in parent:
-            if required or default is ...:
-                where = f"table [{path.rpartition('.')[0]}]" if "." in path else "top-level table"
-                raise MissingKeyError(f"missing required key (in the {where})", key=path)
-            return default
-        return self.convert(parent[key], path, kind)
-
-    def convert(self, value: Any, path: str, kind: str) -> Any:
-        if kind == "str" and isinstance(value, str):
-            return value
-        if kind == "bool" and isinstance(value, bool):
-            return value
-        if kind == "int" and isinstance(value, int) and not isinstance(value, bool):
-            return value
-        if (
-            kind == "float"
-            and isinstance(value, (int, float))
-            and not isinstance(value, bool)
-            and math.isfinite(value)
-        ):
-            return float(value)
-        want = {"str": "a string", "bool": "a boolean", "int": "an integer", "float": "a number"}
-        raise ScenarioTypeError(
-            f"must be {want[kind]}, got {self._type_name(value)} {value!r}", key=path
-        )
-
-    def vector(self, value: Any, path: str, n: int, kind: str) -> tuple:
-        if not isinstance(value, list) or len(value) != n:
-            raise ScenarioTypeError(
-                f"must be an array of {n} {'integers' if kind == 'int' else 'numbers'}, "
-                f"got {value!r}",
-                key=path,
-            )
-        return tuple(self.convert(v, f"{path}[{k}]", kind) for k, v in enumerate(value))
-
-    def vectors(self, parent: dict, key: str, path: str, n: int, kind: str) -> tuple:
-        value = parent.get(key, [])
-        if not isinstance(value, list):
-            raise ScenarioTypeError(f"must be an array of arrays, got {value!r}", key=path)
-        return tuple(self.vector(v, f"{path}[{k}]", n, kind) for k, v in enumerate(value))
-
-    def region(self, table: dict, path: str, extra: Iterable[str] = ()) -> Region:
-        allowed = {"rects", "cells", *extra}
-        self.no_unknown(table, allowed, path)
-        if "rects" not in table and "cells" not in table:
-            raise MissingKeyError(
-                f"a region needs 'rects' (metres) and/or 'cells' (indices) in [{path}]",
-                key=f"{path}.rects",
-            )
-        return Region(
-            rects=self.vectors(table, "rects", f"{path}.rects", 4, "float"),
-            cells=self.vectors(table, "cells", f"{path}.cells", 2, "int"),
-        )
-
-    @staticmethod
-    def no_unknown(table: dict, allowed: Iterable[str], path: str) -> None:
-        allowed = set(allowed)
-        for key in table:
-            if key not in allowed:
-                full = f"{path}.{key}" if path else key
-                raise UnknownKeyError(
-                    f"unknown key (allowed here: {', '.join(sorted(allowed))})", key=full
-                )
-
-
-def scenario_from_dict(data: dict[str, Any]) -> Scenario:
-    """Build a :class:`Scenario` from parsed TOML (see the module doc for the format).
-
-    Raises:
-        ScenarioError: a subclass naming the key (without a line; see :func:`parse_scenario`).
-    """
-    r = _Reader(data)
-    r.no_unknown(data, _TOP_KEYS, "")
-    world_t = r.table(data, "world", "world", required=True)
-    r.no_unknown(world_t, {"size", "cell"}, "world")
-    if "size" not in world_t:
-        raise MissingKeyError("missing required key (in the table [world])", key="world.size")
-    width, height = r.vector(world_t["size"], "world.size", 2, "float")
-    world = World(width, height, r.scalar(world_t, "cell", "world.cell", "float", 1.0))
-
-    initial_t = r.table(data, "initial", "initial", required=True)
-    initial = r.region(initial_t, "initial", extra=("start",))
-    if "start" not in initial_t:
-        raise MissingKeyError("missing required key (in the table [initial])", key="initial.start")
-    start = r.vector(initial_t["start"], "initial.start", 2, "float")
-
-    regions_t = r.table(data, "regions", "regions", required=True)
-    regions = {}
-    for label, table in regions_t.items():
-        path = f"regions.{label}"
-        if not isinstance(table, dict):
-            raise ScenarioTypeError(
-                f"must be a table with 'rects' and/or 'cells', got {r._type_name(table)}",
-                key=path,
-            )
-        regions[label] = r.region(table, path)
-
-    rewards_t = r.table(data, "rewards", "rewards", required=False)
-    rewards = {k: r.convert(v, f"rewards.{k}", "float") for k, v in rewards_t.items()}
-
-    runner_t = r.table(data, "runner", "runner", required=False)
-    r.no_unknown(runner_t, _RUNNER_TYPES, "runner")
-    runner = RunnerParams(
-        **{
-            k: r.convert(v, f"runner.{k}", "int" if _RUNNER_TYPES[k] in (int, "int") else "float")
-            for k, v in runner_t.items()
-        }
-    )
-
-    return Scenario(
-        name=r.scalar(data, "name", "name", "str", required=True),
-        description=r.scalar(data, "description", "description", "str", ""),
-        world=world,
-        regions=regions,
-        initial=initial,
-        start=start,
-        formula=r.scalar(data, "formula", "formula", "str", DEFAULT_FORMULA),
-        rewards=rewards,
-        hazard=r.scalar(data, "hazard", "hazard", "str", "Haz"),
-        goal=r.scalar(data, "goal", "goal", "str", "Goal"),
-        p_sat=r.scalar(data, "p_sat", "p_sat", "float", 0.65),
-        reward_known=r.scalar(data, "reward_known", "reward_known", "bool", True),
-        collect=r.scalar(data, "collect", "collect", "str", "once"),
-        runner=runner,
-    )
-
-
-def parse_scenario(text: str, source: str = "<string>") -> Scenario:
-    """Parse and validate scenario TOML ``text``; errors carry the key, line and ``source``.
-
-    Raises:
-        ScenarioSyntaxError: the text is not TOML (line from tomllib's message).
-        ScenarioError: any other problem (a subclass), located at the key's line.
-    """
-    depth, line = nesting_depth(text)
-    if depth > MAX_TOML_DEPTH:
-        raise ScenarioSyntaxError(
-            f"arrays or tables nested {depth} deep, more than the limit of {MAX_TOML_DEPTH}",
-            line=line,
-            source=source,
-        )
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        match = re.search(r"line (\d+)", str(err))
-        line = int(match.group(1)) if match else getattr(err, "lineno", None)
-        raise ScenarioSyntaxError(f"malformed TOML: {err}", line=line, source=source) from err
-    except ValueError as err:  # tomllib's int() of a number with thousands of digits
-        raise ScenarioSyntaxError(f"malformed TOML: {err}", source=source) from None
-    try:
-        return scenario_from_dict(data)
-    except ScenarioError as err:
-        lines = key_lines(text)
-        line = line_of(lines, err.key) if err.key is not None else None
-        if line is None and err.key is not None and "." in err.key:
-            line = line_of(lines, err.key.rpartition(".")[0])
-        if line is None:
-            line = 1  # the top-level table starts at line 1
-        raise err.located(line, source) from err
-
-
-def resolve_scenario_path(name_or_path: str | Path) -> Path:
-    """The file of a shipped case study (``"a"``..``"d"``) or the given path.
-
-    Raises:
-        ScenarioError: neither a shipped name nor an existing file.
-    """
-    text = str(name_or_path)
-    if text in SHIPPED_SCENARIOS:
-        return Path(str(resources.files("planner") / "scenarios" / f"{text}.toml"))
-    path = Path(text)
-    if not path.is_file():
-        raise ScenarioError(
-            f"no scenario '{text}': not a shipped name ({', '.join(SHIPPED_SCENARIOS)}) "
-            "and not an existing file"
-        )
-    return path
-
-
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """Load a shipped case study by name (``"a"``..``"d"``) or a scenario TOML file by path.
-
-    Raises:
-        ScenarioError: a subclass naming the problem, the key and the line.
-    """
-    path = resolve_scenario_path(name_or_path)
-    text = read_text(path, ScenarioError, MAX_FILE_BYTES)
-    return parse_scenario(text, source=str(path))
+def __getattr__(name: str) -> Any:
+    if name in _FILE_NAMES:
+        return getattr(importlib.import_module("planner.scenario_file"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def ascii_map(scenario: Scenario) -> str:

@@ -201,8 +201,6 @@ def run_check(args: argparse.Namespace) -> int:
 
 def scenario_product_model(name: str):
     """The labelled MT-PIMDP of scenario ``name`` under the GP prior (see the module doc)."""
-    import numpy as np
-
     from hopper_sim.model import HopperModel
     from planner.gp.landing import LandingErrorGP
     from planner.imdp.grid import GridWorld
@@ -212,14 +210,12 @@ def scenario_product_model(name: str):
     from planner.scenario import load_scenario
 
     sc = load_scenario(name)
-    w = sc.world
-    grid = GridWorld(w.nx, w.ny, w.cell, sc.cell_labels, sc.hazard)
+    grid = GridWorld.from_scenario(sc)
     pp = HopperModel.load().perturbation
     bounds = cell_error_bounds(LandingErrorGP(), grid)
     ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
     model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])
-    reward = np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0)
-    return ProductIMDP(model, translate(sc.formula), reward).labelled_model()
+    return ProductIMDP(model, translate(sc.formula), sc.state_rewards).labelled_model()
 
 
 def run_export(args: argparse.Namespace) -> int:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from planner.errors import SpecificationError
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
@@ -50,7 +51,7 @@ def discounted_values(
     full = OrderingAdversary(
         m, adversary_minimizes, rows=free_rows, resort_tolerance=alg.tolerance * 1e-2
     )
-    v, residual, it = np.zeros(m.n_states), 0.0, 0
+    v, residual, it = _start(m, fixed, alg.initial), 0.0, 0
     factor = discount / (1.0 - discount)
     goal = alg.tolerance / (2.0 * factor) if alg.certified and factor > 0 else alg.tolerance
     while free_rows.size and it < alg.max_iterations:
@@ -70,3 +71,15 @@ def discounted_values(
     err = np.where(fixed, 0.0, factor * residual)
     converged = bool(residual < goal) and full.resort_tolerance == 0.0
     return DiscountedResult(v, v - err, v + err, residual, it, q_free, converged)
+
+
+def _start(m: IMDP, fixed: np.ndarray, initial: np.ndarray | None) -> np.ndarray:
+    """The first iterate of the sweeps: ``initial`` off the fixed states (which hold 0)."""
+    if initial is None:
+        return np.zeros(m.n_states)
+    start = np.asarray(initial, dtype=np.float64)
+    if start.shape != (m.n_states,) or not np.all(np.isfinite(start)):
+        raise SpecificationError(
+            f"initial values must be a finite array of shape ({m.n_states},), got {start.shape}"
+        )
+    return np.where(fixed, 0.0, start)

@@ -1,10 +1,11 @@
 """The grid abstraction of the world (docs/design.md, "Abstraction").
 
-The world is ``nx x ny`` cells of side ``cell`` metres with its origin at the lower-left
-corner; cell ``(i, j)`` covers ``[i*cell, (i+1)*cell) x [j*cell, (j+1)*cell)`` and has flat
-index ``i * ny + j``. State ``nx * ny`` is the absorbing ``out`` state, labelled with the
-hazard label. Actions, index 0..7: ``N1, N2, E1, E2, S1, S2, W1, W2`` (N = +y, E = +x; hop
-1 or 2 cells). A cell's action is enabled iff its target cell is inside the world.
+A :class:`GridWorld` is the cells of a :class:`~planner.geometry.GridGeometry` (indices,
+point location and hop targets are defined there) with their labels, the enabled actions
+and the absorbing ``out`` state, index ``nx * ny``, labelled with the hazard label; it builds
+the abstraction's IMDP (:meth:`GridWorld.imdp_from_intervals`). Actions, index 0..7:
+``N1, N2, E1, E2, S1, S2, W1, W2`` (:data:`~planner.geometry.ACTIONS`). A cell's action is
+enabled iff its target cell is inside the world.
 
 ``out`` has exactly one enabled action, :data:`OUT_ACTION` (index 0, ``N1``), a self-loop
 with bounds ``[1, 1]``; it stands for "stay", not for a hop.
@@ -13,27 +14,25 @@ with bounds ``[1, 1]``; it stands for "stay", not for a hop.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from planner.errors import IndexOutOfRangeError, MissingRowError, ModelError
+from planner.geometry import ACTION_OFFSETS, ACTIONS, GridGeometry
 from planner.imdp.model import BOUND_TOLERANCE, IMDP
 
-ACTIONS: tuple[str, ...] = ("N1", "N2", "E1", "E2", "S1", "S2", "W1", "W2")
-"""Action names in index order."""
+if TYPE_CHECKING:
+    from planner.scenario import Scenario
 
-ACTION_OFFSETS: np.ndarray = np.array(
-    [[0, 1], [0, 2], [1, 0], [2, 0], [0, -1], [0, -2], [-1, 0], [-2, 0]], dtype=np.int64
-)
-"""``(8, 2)`` cell offsets ``(di, dj)`` of the actions."""
-ACTION_OFFSETS.setflags(write=False)
+__all__ = ["ACTIONS", "ACTION_OFFSETS", "OUT_ACTION", "GridWorld"]
 
 OUT_ACTION = 0
 """The only enabled action of ``out``: a self-loop."""
 
 
-class GridWorld:
-    """The cells, their labels, the actions and the ``out`` state.
+class GridWorld(GridGeometry):
+    """The cells of a grid geometry, their labels, the actions and the ``out`` state.
 
     Args:
         nx, ny: number of cells along x and y.
@@ -54,10 +53,8 @@ class GridWorld:
         labels: Sequence[Iterable[str]] | np.ndarray | None = None,
         hazard_label: str = "Haz",
     ) -> None:
-        if int(nx) <= 0 or int(ny) <= 0 or not float(cell) > 0:
-            raise ModelError(f"grid needs nx, ny >= 1 and cell > 0, got {nx}, {ny}, {cell}")
-        self.nx, self.ny, self.cell = int(nx), int(ny), float(cell)
-        n = self.nx * self.ny
+        super().__init__(nx, ny, cell)
+        n = self.n_cells
         if labels is None:
             cell_labels = [frozenset()] * n
         else:
@@ -75,9 +72,7 @@ class GridWorld:
             frozenset({self.hazard_label}),
         )
         self.propositions: tuple[str, ...] = tuple(sorted(set().union(*self.labels)))
-        i, j = self.cell_ij(np.arange(n))
-        ti = i[:, None] + ACTION_OFFSETS[None, :, 0]
-        tj = j[:, None] + ACTION_OFFSETS[None, :, 1]
+        ti, tj = self.hop_targets[..., 0], self.hop_targets[..., 1]
         inside = (ti >= 0) & (ti < self.nx) & (tj >= 0) & (tj < self.ny)
         self.target_cell: np.ndarray = np.where(inside, ti * self.ny + tj, -1)
         """``(n_cells, 8)`` target cell index of each action (-1: not enabled)."""
@@ -86,15 +81,18 @@ class GridWorld:
         enabled[n, OUT_ACTION] = True
         self.enabled: np.ndarray = enabled
         """``(n_states, 8)`` enabled actions (``out``: only :data:`OUT_ACTION`)."""
-        centres = np.stack([(ti + 0.5) * self.cell, (tj + 0.5) * self.cell], axis=-1)
-        self.target_centres: np.ndarray = np.where(inside[..., None], centres, np.nan)
+        self.target_centres: np.ndarray = np.where(
+            inside[..., None], self.hop_target_centres, np.nan
+        )
         """``(n_cells, 8, 2)`` target centre in metres (NaN where not enabled)."""
         for a in (self.target_cell, self.enabled, self.target_centres):
             a.setflags(write=False)
 
-    @property
-    def n_cells(self) -> int:
-        return self.nx * self.ny
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> GridWorld:
+        """The grid of ``scenario``'s world with its cells' labels and its hazard label."""
+        w = scenario.world
+        return cls(w.nx, w.ny, w.cell, scenario.cell_labels, scenario.hazard)
 
     @property
     def n_states(self) -> int:
@@ -102,30 +100,8 @@ class GridWorld:
 
     @property
     def out(self) -> int:
-        """Index of the absorbing ``out`` state."""
-        return self.n_cells
-
-    def cell_index(self, i: np.ndarray | int, j: np.ndarray | int) -> np.ndarray:
-        """Flat index ``i * ny + j`` (``out`` where ``(i, j)`` lies outside the world)."""
-        i, j = np.asarray(i), np.asarray(j)
-        inside = (i >= 0) & (i < self.nx) & (j >= 0) & (j < self.ny)
-        return np.where(inside, i * self.ny + j, self.out)
-
-    def cell_ij(self, index: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
-        """``(i, j)`` of flat cell indices."""
-        index = np.asarray(index)
-        return index // self.ny, index % self.ny
-
-    def locate(self, xy: np.ndarray) -> np.ndarray:
-        """State index of points ``xy`` (shape ``(..., 2)``, metres); ``out`` outside."""
-        xy = np.asarray(xy, dtype=np.float64)
-        ij = np.floor(xy / self.cell).astype(np.int64)
-        return self.cell_index(ij[..., 0], ij[..., 1])
-
-    def centres(self) -> np.ndarray:
-        """``(n_cells, 2)`` cell centres in metres."""
-        i, j = self.cell_ij(np.arange(self.n_cells))
-        return np.stack([(i + 0.5) * self.cell, (j + 0.5) * self.cell], axis=-1)
+        """Index of the absorbing ``out`` state (:attr:`outside`)."""
+        return self.outside
 
     def label_mask(self, name: str) -> np.ndarray:
         """``(n_states,)`` mask of the states carrying label ``name``."""

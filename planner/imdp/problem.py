@@ -170,6 +170,8 @@ class ValueIteration:
             *uncertified* mode: it stops on the residual alone, which does not bound the
             error (a slow leak can leave an error far above the residual); its ``upper``
             is then the trivial bound.
+        initial: discounted reward only: ``(n_states,)`` values to start the sweeps from
+            (a warm start; any start converges, the sweeps contract). Default 0.
     """
 
     tolerance: float = 1e-8
@@ -178,6 +180,7 @@ class ValueIteration:
     precompute: bool = True
     strategy_iteration: bool = True
     certified: bool = True
+    initial: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not self.tolerance > 0:

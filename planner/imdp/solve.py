@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.discounted import discounted_values
 from planner.imdp.model import IMDP
@@ -142,6 +143,8 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     fixed = ~graph.has_row(m, rows)
     fixed_val = np.zeros(m.n_states)
     reach = isinstance(prop, ReachAvoid)
+    if reach and alg.initial is not None:
+        raise SpecificationError("initial values are for discounted reward (reachability from 0)")
     if reach:
         settled, fixed_val, prob1, prob1_choice = _settled(
             m, prop, rows, maximize, pessimistic, alg.precompute

@@ -45,7 +45,7 @@ def run_events(
         z = 1.0 + 0.3 * np.abs(np.sin(np.pi * (2 * s - 0.5)))
         com = np.column_stack([xy, z])
         foot = np.array([*(pos + 0.5 * (landing - pos)), 0.0])
-        cell = int(w.cell_of(landing))
+        cell = int(w.geometry.locate(landing))
         reward = float(scenario.reward_grid.ravel()[cell]) if cell < w.n_cells else 0.0
         total += reward
         goal_phase = step >= n_hops // 2

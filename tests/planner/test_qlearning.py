@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from planner._util.sealed import seal
-from planner.errors import QTableError
+from planner.errors import QTableError, SpecificationError
 from planner.imdp import IMDP, DiscountedReward, Problem, Specification, ValueIteration, solve
+from planner.imdp.solve import ReachAvoid
 from planner.qlearning import (
     SEAL_KIND,
     GreedyQ,
@@ -67,6 +68,32 @@ def test_robust_q_iteration_agrees_with_discounted_value_iteration_and_warm_star
     warm = robust_q_iteration(model, w, discount=0.9, tolerance=1e-10, initial=mine.q)
     assert warm.iterations < 5 < mine.iterations
     np.testing.assert_allclose(warm.values, mine.values, atol=1e-8)
+
+
+def test_robust_q_iteration_is_the_uncertified_discounted_solve_with_a_warm_start():
+    rng = np.random.default_rng(4)
+    model = _random_model(rng)
+    w = rng.normal(size=model.n_states)
+    allowed = model.enabled & (rng.random(model.enabled.shape) < 0.6)
+    cold = robust_q_iteration(model, w, discount=0.9, allowed=allowed, tolerance=1e-7)
+    start = np.nanmax(np.where(allowed, cold.q, np.nan), axis=1, initial=-np.inf)
+    start = np.where(np.isfinite(start), start, 0.0) + 0.25
+    q0 = np.where(allowed, cold.q + 0.25, np.nan)
+    warm = robust_q_iteration(model, w, discount=0.9, allowed=allowed, initial=q0, tolerance=1e-7)
+    spec = Specification(DiscountedReward(w, 0.9))
+    ref = solve(Problem(model, spec, allowed), ValueIteration(1e-7, certified=False, initial=start))
+    np.testing.assert_array_equal(warm.values, ref.values)
+    assert warm.iterations == ref.iterations and warm.residual == ref.residual
+    np.testing.assert_allclose(warm.values, cold.values, atol=1e-5)
+    # the Q-table also values the rows outside ``allowed`` (under the same values)
+    assert np.isfinite(warm.q[model.enabled & ~allowed]).all()
+    with pytest.raises(SpecificationError, match="discounted reward"):
+        solve(
+            Problem(model, Specification(ReachAvoid([0]))),
+            ValueIteration(initial=np.zeros(model.n_states)),
+        )
+    with pytest.raises(SpecificationError, match="initial values"):
+        solve(Problem(model, spec), ValueIteration(initial=np.zeros(2)))
 
 
 def _ring() -> IMDP:

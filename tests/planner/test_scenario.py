@@ -53,7 +53,9 @@ def test_base_scenario_derived_arrays():
 
 def test_cell_of_maps_outside_points_to_out_state():
     w = World(4.0, 3.0, 1.0)
-    cells = w.cell_of(np.array([[0.1, 0.1], [3.99, 2.99], [4.0, 1.0], [-0.01, 1.0], [1.5, 3.0]]))
+    cells = w.geometry.locate(
+        np.array([[0.1, 0.1], [3.99, 2.99], [4.0, 1.0], [-0.01, 1.0], [1.5, 3.0]])
+    )
     np.testing.assert_array_equal(cells, [0, 11, 12, 12, 12])
 
 
