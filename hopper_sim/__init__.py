@@ -66,7 +66,7 @@ _EXPORTS: dict[str, str] = {
     "Panel": "hopper_sim.figures",
     "Route": "hopper_sim.figures",
     "render_figure": "hopper_sim.figures",
-    "save_figure": "hopper_sim.figures",
+    "save_figure": "hopper_sim.figure_files",
     "write_table_plot": "hopper_sim.sweep_plot",
     # sweeps and provenance
     "SweepSpec": "hopper_sim.sweep",

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hopper_sim.figures import PNG_DPI, FigureError, check_destination, new_figure, save_figure
+from hopper_sim.figure_files import PNG_DPI, FigureError, check_destination, new_figure, save_figure
 
 if TYPE_CHECKING:
     from hopper_sim.sweep import CellSummary
@@ -52,7 +52,7 @@ def write_table_plot(
 ) -> Path:
     """Draw the Table I plot of ``cells`` (:func:`build_table_plot`) and write it to ``path``
     (``.png``, ``.svg`` or ``.pdf``; its folder must exist), with ``metadata`` (e.g. the
-    sweep's provenance) as in :func:`~hopper_sim.figures.save_figure`.
+    sweep's provenance) as in :func:`~hopper_sim.figure_files.save_figure`.
 
     Raises:
         FigureError: no cells, an unknown extension or a missing folder.
