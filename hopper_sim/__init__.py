@@ -69,8 +69,8 @@ _EXPORTS: dict[str, str] = {
     "save_figure": "hopper_sim.figure_files",
     "write_table_plot": "hopper_sim.sweep_plot",
     # sweeps and provenance
-    "SweepSpec": "hopper_sim.sweep",
-    "SweepResult": "hopper_sim.sweep",
+    "SweepSpec": "hopper_sim.sweep_grid",
+    "SweepResult": "hopper_sim.sweep_stats",
     "run_sweep": "hopper_sim.sweep",
     "write_outputs": "hopper_sim.sweep_files",
     "provenance": "hopper_sim.provenance",
