@@ -75,6 +75,8 @@ _EXPORTS: dict[str, str] = {
     "write_outputs": "hopper_sim.sweep_files",
     "provenance": "hopper_sim.provenance",
     "scenario_digest": "hopper_sim.provenance",
+    # errors
+    "HopperSimError": "hopper_sim.errors",
 }
 
 __all__ = ["ENV_ID", "__version__", *_EXPORTS]

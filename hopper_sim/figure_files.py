@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.provenance import as_text
 from planner.atomic import atomic_write
 
@@ -27,7 +28,7 @@ PNG_DPI = 200
 """Resolution of PNG figures, dots per inch."""
 
 
-class FigureError(ValueError):
+class FigureError(HopperSimError, ValueError):
     """A figure cannot be written (unknown format, missing folder, bad size...)."""
 
 

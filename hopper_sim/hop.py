@@ -24,6 +24,7 @@ import numpy as np
 
 from hopper_sim import slip
 from hopper_sim import thrust as thrust_law
+from hopper_sim.errors import HopperSimError
 from hopper_sim.hop_checks import HopInputError, implausible, validate_inputs, validate_range
 from hopper_sim.hop_checks import max_speed as max_speed  # re-exported
 from hopper_sim.model import HopperModel
@@ -47,7 +48,7 @@ MAX_STANCE_TIME = 2.0
 PATH_SAMPLES = 16
 
 
-class HopFailure(Exception):
+class HopFailure(HopperSimError):
     """A hop failed; ``reason`` is one of :data:`STATUS_NAMES` other than ``"ok"``:
 
     * ``no_touchdown``: the leg would not be compressed at touchdown, or the flight after

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hopper_sim.errors import HopperSimError
+
 #: Fewest integration steps in which the leg may sweep its rest length: it bounds the speeds
 #: a hop accepts, ``|v_xy|, |v_z| <= l0 / (MIN_SWEEP_STEPS * dt)`` (50 m/s for the shipped
 #: model, six times the controller's training box; beyond it a stance spans a few steps).
@@ -26,7 +28,7 @@ MAX_POSITION = 1.0e6
 PASSIVE_ENERGY_TOLERANCE = 1.0e-4
 
 
-class HopInputError(ValueError):
+class HopInputError(HopperSimError, ValueError):
     """Invalid hop input (shape, non-finite value, angle or vertical velocity out of range)."""
 
 

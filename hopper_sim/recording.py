@@ -112,6 +112,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import rerun as rr
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
 from hopper_sim.provenance import as_text
 from hopper_sim.recording_hops import hop_duration, is_number, is_scalar, send_hops
@@ -130,7 +131,7 @@ _SYNTHESIS_FIELDS = {f.name for f in dataclasses.fields(SynthesisEvent)}
 _END_FIELDS = {f.name for f in dataclasses.fields(RunEnd)}
 
 
-class RecordingError(ValueError):
+class RecordingError(HopperSimError, ValueError):
     """A recording cannot be written or read (missing, corrupt or truncated file...)."""
 
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.events import RunEnd
 
 if TYPE_CHECKING:
@@ -53,15 +54,15 @@ PAPER_TABLE_I: dict[tuple[float, float], tuple[float, float]] = {
 MAX_RUNS = 100_000
 
 
-class SweepError(ValueError):
+class SweepError(HopperSimError, ValueError):
     """A sweep was set up with bad parameters."""
 
 
-class SweepBackendError(RuntimeError):
+class SweepBackendError(HopperSimError, RuntimeError):
     """A backend cannot run (unknown name, or its optional package is missing)."""
 
 
-class SweepRunError(RuntimeError):
+class SweepRunError(HopperSimError, RuntimeError):
     """One run of the sweep failed; the message names its cell, run number and seed."""
 
 
