@@ -221,37 +221,6 @@ def _run_stance(
     return _Stance("no_liftoff", f"leg not back at l0 after {MAX_STANCE_TIME} s of stance", n + 1)
 
 
-def _new_result(
-    pos: np.ndarray,
-    vel: np.ndarray,
-    alpha: np.ndarray,
-    beta: np.ndarray,
-    td: slip.Touchdown,
-    force: np.ndarray,
-    nu: np.ndarray,
-    c: float,
-    e_before: float,
-) -> HopResult:
-    """The hop's result before its stance: the inputs, the touchdown state, not yet ok."""
-    return HopResult(
-        ok=False,
-        status="",
-        message="",
-        pos=pos[0].copy(),
-        vel=vel[0].copy(),
-        alpha=float(alpha[0]),
-        beta=float(beta[0]),
-        energy_before=e_before,
-        touchdown_time=float(td.time[0]),
-        touchdown_pos=td.com[0].copy(),
-        touchdown_vel=td.vel[0].copy(),
-        foot=td.foot[0].copy(),
-        terrain_force=np.asarray(force, dtype=float).reshape(2).copy(),
-        thrust_command=float(c),
-        noise=nu[0].copy(),
-    )
-
-
 def _record_descent(
     result: HopResult, p, pos: np.ndarray, vel: np.ndarray, td: slip.Touchdown
 ) -> np.ndarray:
@@ -301,7 +270,23 @@ def _hop_with_command(
     p = hm.params
     g = p.gravity
     e_before = float(hm.energy(p.rest_length, vel[0]))
-    result = _new_result(pos, vel, alpha, beta, td, force, nu, c, e_before)
+    result = HopResult(
+        ok=False,
+        status="",
+        message="",
+        pos=pos[0].copy(),
+        vel=vel[0].copy(),
+        alpha=float(alpha[0]),
+        beta=float(beta[0]),
+        energy_before=e_before,
+        touchdown_time=float(td.time[0]),
+        touchdown_pos=td.com[0].copy(),
+        touchdown_vel=td.vel[0].copy(),
+        foot=td.foot[0].copy(),
+        terrain_force=np.asarray(force, dtype=float).reshape(2).copy(),
+        thrust_command=float(c),
+        noise=nu[0].copy(),
+    )
     descent = _record_descent(result, p, pos, vel, td) if record else None
     if not td.leg_rate[0] < 0.0:
         result.status = "no_touchdown"
