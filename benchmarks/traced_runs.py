@@ -19,7 +19,7 @@ import numpy as np
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, SynthesisEvent
 from hopper_sim.runner import NavigationRunner
-from hopper_sim.sweep import _init_worker
+from hopper_sim.sweep_backends import _init_worker
 from planner.imdp.grid import ACTIONS
 from planner.intervals import TransitionIntervals
 from planner.learning import Resynthesis

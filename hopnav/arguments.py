@@ -133,13 +133,13 @@ def output_file(
 
 def figure_file(path: str | os.PathLike[str], what: str) -> Path:
     """Check that a figure can be written at ``path``: its extension names a format of
-    :data:`hopper_sim.figures.FIGURE_FORMATS` (``.png``, ``.svg``, ``.pdf``), and
+    :data:`hopper_sim.figure_files.FIGURE_FORMATS` (``.png``, ``.svg``, ``.pdf``), and
     :func:`output_file` accepts it.
 
     Raises:
         UsageError: naming the option, the path and the problem.
     """
-    from hopper_sim.figures import FIGURE_FORMATS
+    from hopper_sim.figure_files import FIGURE_FORMATS
 
     target = Path(path)
     suffix = target.suffix.lower()

@@ -66,15 +66,17 @@ _EXPORTS: dict[str, str] = {
     "Panel": "hopper_sim.figures",
     "Route": "hopper_sim.figures",
     "render_figure": "hopper_sim.figures",
-    "save_figure": "hopper_sim.figures",
+    "save_figure": "hopper_sim.figure_files",
     "write_table_plot": "hopper_sim.sweep_plot",
     # sweeps and provenance
-    "SweepSpec": "hopper_sim.sweep",
-    "SweepResult": "hopper_sim.sweep",
+    "SweepSpec": "hopper_sim.sweep_grid",
+    "SweepResult": "hopper_sim.sweep_stats",
     "run_sweep": "hopper_sim.sweep",
     "write_outputs": "hopper_sim.sweep_files",
     "provenance": "hopper_sim.provenance",
     "scenario_digest": "hopper_sim.provenance",
+    # errors
+    "HopperSimError": "hopper_sim.errors",
 }
 
 __all__ = ["ENV_ID", "__version__", *_EXPORTS]

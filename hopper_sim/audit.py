@@ -55,7 +55,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hopper_sim.batch import simulate_hops
+from hopper_sim.batch import BatchHopResult, simulate_hops
 from hopper_sim.controller.simulator import nominal_energy
 from hopper_sim.environment import HopperGridEnv
 from hopper_sim.events import HopEvent, Observer
@@ -182,6 +182,98 @@ def _first_k(group: np.ndarray, limit: np.ndarray) -> np.ndarray:
     return keep
 
 
+def _pair_index(grid: GridWorld, pairs: np.ndarray) -> np.ndarray:
+    """``(n_cells, n_actions)``: the position of each audited ``(cell, action)`` in
+    ``pairs``, -1 for the others.
+
+    Raises:
+        ValueError: a pair's action is not enabled in its cell, or a pair is repeated.
+    """
+    if pairs.size and not grid.enabled[pairs[:, 0], pairs[:, 1]].all():
+        bad = pairs[~grid.enabled[pairs[:, 0], pairs[:, 1]]][0]
+        raise ValueError(f"action {ACTIONS[bad[1]]} is not enabled in cell {bad[0]}")
+    n_pairs = len(pairs)
+    pair_index = np.full((grid.n_cells, len(ACTIONS)), -1, dtype=np.int64)
+    pair_index[pairs[:, 0], pairs[:, 1]] = np.arange(n_pairs)
+    if len(np.unique(pair_index[pair_index >= 0])) != n_pairs or (
+        n_pairs and (pair_index[pairs[:, 0], pairs[:, 1]] != np.arange(n_pairs)).any()
+    ):
+        raise ValueError("each (cell, action) pair may be audited only once")
+    return pair_index
+
+
+def _resynthesise(runner: NavigationRunner, data: RunData) -> Resynthesis:
+    """The re-synthesis the loop makes on ``data``, with the runner's settings."""
+    with torch_threads(runner.settings.torch_threads):
+        return resynthesise(
+            LandingErrorGP(runner.gp_settings),
+            runner.grid,
+            runner.automaton,
+            data.positions,
+            data.errors,
+            actions=data.actions,
+            reward=runner.env.reward_table,
+            initial_cell=runner.scenario.start_cell,
+            settings=runner.synthesis_settings,
+        )
+
+
+def _decide(
+    runner: NavigationRunner,
+    allowed: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    cells: np.ndarray,
+    acts: np.ndarray,
+    progress: Callable[[int], None] | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(executed action, alpha, beta)`` of the controller at each start state
+    ``(pos[k], vel[k])`` of ``cells[k]`` asked for ``acts[k]``, choosing among the loop's
+    allowed actions of the cell and the request."""
+    env, grid = runner.env, runner.grid
+    ex = np.empty(cells.size, dtype=np.int64)
+    alpha = np.empty(cells.size)
+    beta = np.empty(cells.size)
+    # the controller solves one departure state at a time (its batch is over targets)
+    with torch_threads(runner.settings.torch_threads):
+        for k in range(cells.size):
+            choice = allowed[cells[k]].copy()
+            choice[acts[k]] = True
+            ids = np.flatnonzero(choice)
+            d = env.controller.decide(
+                pos[k], vel[k], ids, grid.target_centres[cells[k], ids], int(acts[k])
+            )
+            ex[k], alpha[k], beta[k] = d.executed, d.alpha, d.beta
+            if progress is not None:
+                progress(1)
+    return ex, alpha, beta
+
+
+def _simulate(
+    env: HopperGridEnv,
+    rng: np.random.Generator,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    energy: float,
+) -> BatchHopResult:
+    """The hops from ``(pos, vel)`` at the touchdown angles ``(alpha, beta)`` in MuJoCo, with
+    the world's terrain, fresh landing noise and the stance thrust regulated to ``energy``."""
+    nu = sample_model_noise(env.model, rng, len(pos))
+    return simulate_hops(
+        env.model,
+        vel,
+        alpha,
+        beta,
+        pos=pos,
+        terrain=env.terrain,
+        noise=nu,
+        thrust=True,
+        nominal_energy=energy,
+    )
+
+
 def audit_intervals(
     runner: NavigationRunner,
     data: RunData,
@@ -197,32 +289,13 @@ def audit_intervals(
     ids), sampling as the loop does (module docstring); ``attempts``: the cap on each pair's
     own requests, in multiples of ``samples``; ``progress`` gets the number of controller
     decisions made."""
-    env, grid, settings = runner.env, runner.grid, runner.settings
+    env, grid = runner.env, runner.grid
     pairs = np.asarray(pairs, dtype=int).reshape(-1, 2)
     if samples < 1 or attempts < 1:
         raise ValueError(f"samples and attempts must be >= 1, got {samples}, {attempts}")
-    if pairs.size and not grid.enabled[pairs[:, 0], pairs[:, 1]].all():
-        bad = pairs[~grid.enabled[pairs[:, 0], pairs[:, 1]]][0]
-        raise ValueError(f"action {ACTIONS[bad[1]]} is not enabled in cell {bad[0]}")
+    pair_index = _pair_index(grid, pairs)
     n_pairs = len(pairs)
-    pair_index = np.full((grid.n_cells, len(ACTIONS)), -1, dtype=np.int64)
-    pair_index[pairs[:, 0], pairs[:, 1]] = np.arange(n_pairs)
-    if len(np.unique(pair_index[pair_index >= 0])) != n_pairs or (
-        n_pairs and (pair_index[pairs[:, 0], pairs[:, 1]] != np.arange(n_pairs)).any()
-    ):
-        raise ValueError("each (cell, action) pair may be audited only once")
-    with torch_threads(settings.torch_threads):
-        res = resynthesise(
-            LandingErrorGP(runner.gp_settings),
-            grid,
-            runner.automaton,
-            data.positions,
-            data.errors,
-            actions=data.actions,
-            reward=env.reward_table,
-            initial_cell=runner.scenario.start_cell,
-            settings=runner.synthesis_settings,
-        )
+    res = _resynthesise(runner, data)
     allowed = loop_allowed_actions(res, grid, runner.scenario.p_sat)
     energy = nominal_energy(env.model, env.controller.steady.speed)
 
@@ -242,39 +315,14 @@ def audit_intervals(
         i, j = grid.cell_ij(cells)
         pos = (np.stack([i, j], axis=1) + rng.random((cells.size, 2))) * grid.cell
         vel = data.velocities[rng.integers(len(data.velocities), size=cells.size)]
-        ex = np.empty(cells.size, dtype=np.int64)
-        alpha = np.empty(cells.size)
-        beta = np.empty(cells.size)
-        # the controller solves one departure state at a time (its batch is over targets)
-        with torch_threads(settings.torch_threads):
-            for k in range(cells.size):
-                choice = allowed[cells[k]].copy()
-                choice[acts[k]] = True
-                ids = np.flatnonzero(choice)
-                d = env.controller.decide(
-                    pos[k], vel[k], ids, grid.target_centres[cells[k], ids], int(acts[k])
-                )
-                ex[k], alpha[k], beta[k] = d.executed, d.alpha, d.beta
-                if progress is not None:
-                    progress(1)
+        ex, alpha, beta = _decide(runner, allowed, pos, vel, cells, acts, progress)
         decisions += cells.size
         as_requested += np.bincount(req_pair[ex == acts], minlength=n_pairs)
         ex_pair = pair_index[cells, ex]
         keep = _first_k(ex_pair, samples - executed)
         if not keep.any():
             continue
-        nu = sample_model_noise(env.model, rng, int(keep.sum()))
-        out = simulate_hops(
-            env.model,
-            vel[keep],
-            alpha[keep],
-            beta[keep],
-            pos=pos[keep],
-            terrain=env.terrain,
-            noise=nu,
-            thrust=True,
-            nominal_energy=energy,
-        )
+        out = _simulate(env, rng, pos[keep], vel[keep], alpha[keep], beta[keep], energy)
         hops += int(keep.sum())
         failures += int((~out.ok).sum())
         pid = ex_pair[keep][out.ok]

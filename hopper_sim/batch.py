@@ -23,16 +23,9 @@ import numpy as np
 
 from hopper_sim import slip
 from hopper_sim import thrust as thrust_law
-from hopper_sim.hop import (
-    MAX_STANCE_TIME,
-    STATUS_CODES,
-    STATUS_NAMES,
-    HopInputError,
-    implausible,
-    validate_inputs,
-    validate_range,
-)
-from hopper_sim.model import HopperModel
+from hopper_sim.hop import MAX_STANCE_TIME, STATUS_CODES, STATUS_NAMES
+from hopper_sim.hop_checks import HopInputError, implausible, validate_inputs, validate_range
+from hopper_sim.model import HopperModel, ReplicatedModel
 from hopper_sim.terrain import ForceField
 
 _OK = STATUS_CODES["ok"]
@@ -88,6 +81,85 @@ class _StanceBatch:
     vel: np.ndarray
 
 
+@dataclass
+class _Copies:
+    """The K-copy simulations of one stance batch: which hop each copy holds and its state.
+
+    Attributes:
+        rows: ``(G, K)`` the hop row in each copy, -1 for an unused copy.
+        active: ``(G, K)`` whether the copy is still in stance.
+        foot: ``(G, K, 3)`` foot positions [m] (an inert copy's 10 km above its CoM).
+        c: ``(G, K)`` thrust commands [N s/m].
+    """
+
+    rows: np.ndarray
+    active: np.ndarray
+    foot: np.ndarray
+    c: np.ndarray
+
+
+def _load_copies(
+    rep: ReplicatedModel,
+    views: dict[str, np.ndarray],
+    rows: np.ndarray,
+    td: slip.Touchdown,
+    force: np.ndarray,
+    command: np.ndarray,
+    g: int,
+    k: int,
+    rest_length: float,
+) -> _Copies:
+    """Place hop ``rows[j]`` in copy ``j % k`` of simulation ``j // k`` (touchdown state,
+    foot, terrain force), the unused copies inert; returns what the loop tracks."""
+    n = rows.size
+    far = np.array([0.0, 0.0, _INERT_HEIGHT])
+    slot_rows = np.full(g * k, -1)
+    slot_rows[:n] = rows
+    slot_rows = slot_rows.reshape(g, k)
+    com0 = np.tile([0.0, 0.0, rest_length], (g * k, 1))
+    vel0 = np.zeros((g * k, 3))
+    foot = com0 + far
+    f_ext = np.zeros((g * k, 2))
+    c = np.zeros(g * k)
+    com0[:n], vel0[:n], foot[:n] = td.com[rows], td.vel[rows], td.foot[rows]
+    f_ext[:n], c[:n] = force[rows], command[rows]
+    com0, vel0, foot = com0.reshape(g, k, 3), vel0.reshape(g, k, 3), foot.reshape(g, k, 3)
+    views["qpos"][:, rep.qpos_adr] = com0
+    views["qvel"][:, rep.dof_adr] = vel0
+    views["mocap_pos"][:, rep.foot_mocap] = foot
+    views["xfrc_applied"][:, rep.com_body, :2] = f_ext.reshape(g, k, 2)
+    return _Copies(rows=slot_rows, active=slot_rows >= 0, foot=foot, c=c.reshape(g, k))
+
+
+def _retire(
+    rep: ReplicatedModel,
+    views: dict[str, np.ndarray],
+    copies: _Copies,
+    out: _StanceBatch,
+    step: int,
+    s_abs: np.ndarray,
+    ki: np.ndarray,
+    status: np.ndarray,
+    q0: np.ndarray,
+    v0: np.ndarray,
+    q1: np.ndarray,
+) -> np.ndarray:
+    """Record the copies ``(s_abs, ki)`` whose stance ended at ``step`` with ``status`` (the
+    state before the step), and make them inert; returns their hop rows."""
+    r = copies.rows[s_abs, ki]
+    out.status[r] = status
+    out.steps[r] = step
+    out.com[r] = q0
+    out.vel[r] = v0
+    copies.active[s_abs, ki] = False
+    here = np.where(np.isfinite(q1), q1, 0.0) + np.array([0.0, 0.0, _INERT_HEIGHT])
+    copies.foot[s_abs, ki] = here
+    views["mocap_pos"][s_abs, rep.foot_mocap[ki]] = here
+    views["xfrc_applied"][s_abs, rep.com_body[ki], :] = 0.0
+    views["ctrl"][s_abs, rep.thrust_actuator[ki]] = 0.0
+    return r
+
+
 def _run_stances(
     model: HopperModel,
     rows: np.ndarray,
@@ -114,28 +186,12 @@ def _run_stances(
     rep = model.replicated(k)
     g = -(-n // k)
     batch = mujoco.batch.Batch(rep.model, g, nthread)
-    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
-    mocap, xfrc, ctrl = batch.bind("mocap_pos"), batch.bind("xfrc_applied"), batch.bind("ctrl")
+    views = {name: batch.bind(name) for name in ("qpos", "qvel", "mocap_pos", "xfrc_applied")}
+    views["ctrl"] = batch.bind("ctrl")
     batch.reset()
-    far = np.array([0.0, 0.0, _INERT_HEIGHT])
-
-    slot_rows = np.full(g * k, -1)
-    slot_rows[:n] = rows
-    slot_rows = slot_rows.reshape(g, k)
-    active = slot_rows >= 0
-    com0 = np.tile([0.0, 0.0, p.rest_length], (g * k, 1))
-    vel0 = np.zeros((g * k, 3))
-    foot = com0 + far
-    f_ext = np.zeros((g * k, 2))
-    c = np.zeros(g * k)
-    com0[:n], vel0[:n], foot[:n] = td.com[rows], td.vel[rows], td.foot[rows]
-    f_ext[:n], c[:n] = force[rows], command[rows]
-    com0, vel0, foot = com0.reshape(g, k, 3), vel0.reshape(g, k, 3), foot.reshape(g, k, 3)
-    c = c.reshape(g, k)
-    qpos[:, rep.qpos_adr] = com0
-    qvel[:, rep.dof_adr] = vel0
-    mocap[:, rep.foot_mocap] = foot
-    xfrc[:, rep.com_body, :2] = f_ext.reshape(g, k, 2)
+    copies = _load_copies(rep, views, rows, td, force, command, g, k, p.rest_length)
+    qpos, qvel, ctrl = views["qpos"], views["qvel"], views["ctrl"]
+    active, foot, c = copies.active, copies.foot, copies.c
     use_thrust = bool(np.any(c != 0.0))
 
     sims = np.arange(g)  # simulations with a copy still in stance
@@ -159,24 +215,16 @@ def _run_stances(
         finished = active[sims] & (bad | ground | lifted)
         if finished.any():
             si, ki = np.nonzero(finished)
-            s_abs = sims[si]
-            r = slot_rows[s_abs, ki]
-            out.status[r] = np.select([bad[si, ki], ground[si, ki]], [_UNSTABLE, _GROUND], _OK)
-            out.steps[r] = step
-            out.com[r] = q0[si, ki]
-            out.vel[r] = v0[si, ki]
-            active[s_abs, ki] = False
-            here = q1[si, ki]
-            here = np.where(np.isfinite(here), here, 0.0)
-            foot[s_abs, ki] = here + far
-            mocap[s_abs, rep.foot_mocap[ki]] = here + far
-            xfrc[s_abs, rep.com_body[ki], :] = 0.0
-            ctrl[s_abs, rep.thrust_actuator[ki]] = 0.0
+            status = np.select([bad[si, ki], ground[si, ki]], [_UNSTABLE, _GROUND], _OK)
+            r = _retire(
+                rep, views, copies, out, step, sims[si], ki, status,
+                q0[si, ki], v0[si, ki], q1[si, ki],
+            )  # fmt: skip
             if progress is not None:
                 progress(int(r.size))
             sims = sims[active[sims].any(axis=1)]
     if active.any():
-        r = slot_rows[active]
+        r = copies.rows[active]
         out.status[r] = _NO_LIFTOFF
         if progress is not None:
             progress(int(r.size))

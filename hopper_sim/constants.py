@@ -11,7 +11,6 @@ from importlib import resources
 from pathlib import Path
 
 MODELS_DIR: Path = Path(str(resources.files("hopper_sim") / "models"))
-HOPPER_XML: Path = MODELS_DIR / "hopper.xml"
 SCENE_XML: Path = MODELS_DIR / "scene.xml"
 
 # Bodies.
@@ -22,18 +21,10 @@ JOINT_X = "com_x"
 JOINT_Y = "com_y"
 JOINT_Z = "com_z"
 COM_JOINTS: tuple[str, str, str] = (JOINT_X, JOINT_Y, JOINT_Z)
-# Sites.
-SITE_HIP = "hip"
-SITE_FOOT = "foot"
 # Tendon: the push-only spring leg.
 TENDON_LEG = "leg"
 # Actuator: stance thrust, force = ctrl * ldot along the leg.
 ACTUATOR_THRUST = "thrust"
-# Geoms.
-GEOM_COM = "com_ball"
-GEOM_FOOT = "foot_ball"
-GEOM_GROUND = "ground"
-LIGHT_SUN = "sun"
 
 # Custom numerics of the scene: perturbation defaults.
 NUMERIC_TERRAIN_AMPLITUDE = "terrain_amplitude"

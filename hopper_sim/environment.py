@@ -47,6 +47,7 @@ import numpy as np
 from hopper_sim.controller import LegAngleController, load_checkpoint
 from hopper_sim.controller.controller import HopDecision
 from hopper_sim.controller.simulator import nominal_energy
+from hopper_sim.errors import HopperSimError
 from hopper_sim.hop import HopResult, simulate_hop
 from hopper_sim.model import HopperModel
 from hopper_sim.noise import sample_model_noise
@@ -65,7 +66,7 @@ except ImportError:  # pragma: no cover - exercised where gymnasium is absent
     _EnvBase = object
 
 
-class EpisodeError(RuntimeError):
+class EpisodeError(HopperSimError, RuntimeError):
     """The environment was used out of order (a step before reset, a step after the end)."""
 
 

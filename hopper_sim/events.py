@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
+from hopper_sim.errors import HopperSimError
+
 if TYPE_CHECKING:
     from planner.scenario import Scenario
     from planner.verdict import MissionReport
@@ -32,7 +34,7 @@ SOURCES: tuple[str, ...] = ("LTL", "RL")
 OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout", "satisfying")
 
 
-class EventError(ValueError):
+class EventError(HopperSimError, ValueError):
     """An event was built with a bad field (unknown phase, wrong array shape...)."""
 
 

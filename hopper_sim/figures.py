@@ -16,13 +16,17 @@ vector objects). Files carry no creation date, so the same input gives the same 
 Rendering uses matplotlib's Agg canvas directly (no pyplot state, no display needed), and files
 are written atomically (temporary file in the same folder, then moved into place).
 
+The pieces live in siblings: :mod:`hopper_sim.figure_files` (formats, destination checks,
+the atomic save), :mod:`hopper_sim.figure_map` (drawing one map and its route) and
+:mod:`hopper_sim.figure_legend` (the shared legend); this module holds the data drawn
+(:class:`Route`, :class:`Panel`), the layout of one or several maps and the observer.
+
 Runs are numbered from 1 in every title (``RunStart.run_index`` + 1), as in the summary table
 of ``hopnav run``, ``hopnav replay`` and the recording's entity paths.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -33,123 +37,24 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart
-from hopper_sim.provenance import as_text
-from hopper_sim.styles import (
-    GRID_COLOR,
-    INITIAL_COLOR,
-    INITIAL_LETTER,
-    PHASE_COLORS,
-    PHASE_NAMES,
-    WHITE,
-    draw_order,
-    label_colors,
-    legend_entries,
-    region_components,
-    region_letters,
-    simulate_cvd,
+from hopper_sim.figure_files import FIGURE_FORMATS as FIGURE_FORMATS  # re-exported
+from hopper_sim.figure_files import (
+    PNG_DPI,
+    FigureError,
+    check_destination,
+    figure_format,
+    new_figure,
+    save_figure,
 )
-from planner._util.atomic import atomic_write
+from hopper_sim.figure_legend import add_legend, region_handles, route_handles
+from hopper_sim.figure_map import draw_route, draw_world, route_cover
+from hopper_sim.figure_map import region_image as region_image  # re-exported
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
     from planner.scenario import Scenario
-
-FIGURE_FORMATS: dict[str, str] = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
-"""File extension -> format written."""
-
-PNG_DPI = 200
-"""Resolution of PNG figures, dots per inch."""
-
-
-class FigureError(ValueError):
-    """A figure cannot be written (unknown format, missing folder, bad size...)."""
-
-
-def figure_format(path: str | os.PathLike[str]) -> str:
-    """The format of ``path`` by its extension (``png``, ``svg`` or ``pdf``).
-
-    Raises:
-        FigureError: an unknown or missing extension.
-    """
-    ext = Path(path).suffix.lower()
-    if ext not in FIGURE_FORMATS:
-        raise FigureError(
-            f"cannot write {path}: unknown figure format {ext or '(no extension)'!r}; "
-            f"use {', '.join(FIGURE_FORMATS)}"
-        )
-    return FIGURE_FORMATS[ext]
-
-
-def check_destination(path: str | os.PathLike[str]) -> Path:
-    """Check that a figure can be written at ``path`` (known extension, existing writable
-    folder) before any long work; returns it as a :class:`~pathlib.Path`.
-
-    Raises:
-        FigureError: the extension is unknown, or the folder is missing or not writable.
-    """
-    path = Path(path)
-    figure_format(path)
-    folder = path.parent
-    if not folder.is_dir():
-        raise FigureError(f"cannot write {path}: folder {folder} missing")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise FigureError(f"cannot write {path}: folder {folder} is not writable")
-    if path.is_dir():
-        raise FigureError(f"cannot write {path}: it is a folder")
-    return path
-
-
-def save_figure(
-    fig: Figure,
-    path: str | os.PathLike[str],
-    *,
-    dpi: int = PNG_DPI,
-    metadata: Mapping[str, Any] | None = None,
-) -> Path:
-    """Write ``fig`` atomically in the format of ``path``'s extension, without a date.
-
-    ``metadata`` (e.g. the provenance of :func:`hopper_sim.provenance.provenance`) goes where
-    each format has room for it: one PNG text chunk per key (values as text), and the whole
-    record as JSON in the SVG's Dublin Core ``Description`` and the PDF's ``Subject``.
-    """
-    import matplotlib
-
-    path = check_destination(path)
-    fmt = figure_format(path)
-    record = as_text(metadata or {})
-    as_json = json.dumps(record, sort_keys=True) if record else None
-    meta: dict[str, Any] = {
-        "png": {"Software": None, **record},
-        "svg": {"Date": None, "Creator": None, "Description": as_json},
-        "pdf": {"CreationDate": None, "Creator": None, "Producer": None, "Subject": as_json},
-    }[fmt]
-    with matplotlib.rc_context({"svg.hashsalt": "hopnav", "svg.fonttype": "path"}):
-        with atomic_write(path) as f:
-            fig.savefig(f, format=fmt, dpi=dpi, metadata=meta)
-    return path
-
-
-def new_figure(size_inches: tuple[float, float], dpi: int = PNG_DPI) -> Figure:
-    """A matplotlib figure on an Agg canvas (no pyplot, no display)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    if min(size_inches) <= 0 or dpi <= 0:
-        raise FigureError(f"figure size {size_inches} in at {dpi} dpi must be positive")
-    fig = Figure(figsize=size_inches, dpi=dpi)
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _rgb(color: Sequence[int]) -> tuple[float, ...]:
-    return tuple(float(c) / 255.0 for c in color)
-
-
-def _text_color(color: Sequence[int]) -> str:
-    """Black on light cells, white on dark ones (CIELAB lightness below 55)."""
-    return "white" if simulate_cvd(np.asarray(color), "normal")[0] < 55 else "black"
 
 
 # --------------------------------------------------------------------------- data
@@ -247,266 +152,6 @@ def scenario_title(scenario: Scenario) -> str:
     )
 
 
-# --------------------------------------------------------------------------- drawing
-def class_grid(scenario: Scenario) -> tuple[np.ndarray, list[str], list[tuple[int, int, int]]]:
-    """Visible class of every cell: ``(grid (nx, ny) int, names, colours)``, class 0 the empty
-    cell (white), 1 the initial region, then the labels from background to foreground (goal
-    and hazard last, so a hazard cell always shows as one)."""
-    w = scenario.world
-    grid = np.zeros((w.nx, w.ny), dtype=np.int64)
-    names, colors = ["", "initial"], [WHITE, INITIAL_COLOR]
-    grid[scenario.initial_mask] = 1
-    palette = label_colors(scenario.labels, scenario.goal, scenario.hazard)
-    for label in draw_order(scenario.labels, scenario.goal, scenario.hazard):
-        mask = scenario.region_mask(label)
-        if mask.any():
-            names.append(label)
-            colors.append(palette[label])
-            grid[mask] = len(names) - 1
-    return grid, names, colors
-
-
-def region_image(scenario: Scenario) -> np.ndarray:
-    """RGB image ``(ny, nx, 3)`` in [0, 1] of the visible cell classes, row 0 at y = 0."""
-    grid, _, colors = class_grid(scenario)
-    return (np.asarray(colors, dtype=float) / 255.0)[grid].transpose(1, 0, 2)
-
-
-def _cell_points(ax: Axes, scenario: Scenario) -> float:
-    """Size of one cell on the page, points."""
-    fig = ax.figure
-    box = ax.get_position()
-    w, h = fig.get_size_inches()
-    world = scenario.world
-    return 72.0 * min(box.width * w / world.width, box.height * h / world.height) * world.cell
-
-
-def draw_world(ax: Axes, scenario: Scenario, cover: np.ndarray | None = None) -> None:
-    """Cells as vector quads coloured by class, the cell grid, and a letter per region, in
-    its cell least covered by ``cover`` (``(nx, ny)``, e.g. :func:`route_cover`)."""
-    from matplotlib.colors import ListedColormap
-
-    w = scenario.world
-    grid, names, colors = class_grid(scenario)
-    xs = np.arange(w.nx + 1) * w.cell
-    ys = np.arange(w.ny + 1) * w.cell
-    ax.pcolormesh(
-        xs,
-        ys,
-        grid.T,
-        cmap=ListedColormap([_rgb(c) for c in colors]),
-        vmin=-0.5,
-        vmax=len(colors) - 0.5,
-        edgecolors=_rgb(GRID_COLOR),
-        linewidth=0.3,
-        zorder=0,
-    )
-    letters = {"initial": INITIAL_LETTER, **region_letters(scenario.labels)}
-    size = float(np.clip(0.5 * _cell_points(ax, scenario), 3.0, 11.0))
-    for k, name in enumerate(names[1:], start=1):
-        for i, j in region_components(grid == k, cover):
-            covered = cover is not None and cover[i, j] > 0
-            ax.text(
-                (i + 0.5) * w.cell,
-                (j + 0.5) * w.cell,
-                letters[name],
-                ha="center",
-                va="center",
-                fontsize=size,
-                weight="bold",
-                color=_text_color(colors[k]),
-                zorder=9 if covered else 1,  # above a route that crosses every cell
-                path_effects=_halo(2.0, _rgb(colors[k])) if covered else None,
-            )
-    ax.set_xlim(0, w.width)
-    ax.set_ylim(0, w.height)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-
-
-def _halo(width: float, color: str) -> list:
-    from matplotlib import patheffects
-
-    return [patheffects.Stroke(linewidth=width, foreground=color), patheffects.Normal()]
-
-
-_ROUTE_STYLE: dict[str, dict[str, Any]] = {
-    "exploration": {"halo": "black", "linestyle": "-"},
-    "goal_reaching": {"halo": "white", "linestyle": "-"},
-    "fallback": {"halo": "black", "linestyle": (0, (2.0, 1.2))},
-}
-
-
-def draw_route(ax: Axes, route: Route, scenario: Scenario) -> None:
-    """The route drawn once, coloured by phase, an arrow per hop, backups, switch, start, end."""
-    from matplotlib.collections import LineCollection
-
-    cell = scenario.world.cell
-    lw = float(np.clip(0.06 * _cell_points(ax, scenario), 0.6, 1.6))
-    phases = np.asarray(route.phases)
-    for phase, style in _ROUTE_STYLE.items():
-        idx = np.flatnonzero(phases == phase)
-        if not idx.size:
-            continue
-        lines = LineCollection(
-            [route.tracks[k] for k in idx],
-            colors=[_rgb(PHASE_COLORS[phase])],
-            linewidths=lw,
-            linestyles=style["linestyle"],
-            capstyle="round",
-            zorder=3 if phase == "goal_reaching" else 2,
-        )
-        lines.set_path_effects(_halo(lw + 1.4, style["halo"]))
-        ax.add_collection(lines)
-    if route.n_hops:
-        mids, dirs = [], []
-        for track in route.tracks:
-            seg = np.linalg.norm(np.diff(track, axis=0), axis=1)
-            s = np.concatenate([[0.0], np.cumsum(seg)])
-            half = 0.5 * s[-1]
-            mids.append([np.interp(half, s, track[:, d]) for d in range(2)])
-            chord = track[-1] - track[0]
-            dirs.append(chord / max(float(np.linalg.norm(chord)), 1e-12))
-        mids, dirs = np.asarray(mids), np.asarray(dirs) * 0.45 * cell
-        arrow_colors = [_rgb(PHASE_COLORS[p]) for p in route.phases]
-        ax.quiver(
-            mids[:, 0],
-            mids[:, 1],
-            dirs[:, 0],
-            dirs[:, 1],
-            color=arrow_colors,
-            angles="xy",
-            scale_units="xy",
-            scale=1.0,
-            pivot="mid",
-            width=0.0035,
-            headwidth=4.5,
-            headlength=5.0,
-            headaxislength=4.5,
-            edgecolor="black",
-            linewidth=0.35,
-            zorder=4,
-        )
-        ends = np.array([t[-1] for t in route.tracks])
-        if route.backups.any():
-            ax.scatter(
-                ends[route.backups, 0],
-                ends[route.backups, 1],
-                s=22,
-                marker="x",
-                color="black",
-                linewidths=1.1,
-                zorder=5,
-                path_effects=_halo(2.4, "white"),
-            )
-        if route.switch_step is not None and 0 <= route.switch_step < route.n_hops:
-            sx, sy = route.tracks[route.switch_step][0]
-            ax.scatter(
-                sx, sy, s=70, marker="D", color="white", edgecolors="black", linewidths=1.2,
-                zorder=6,
-            )  # fmt: skip
-        ex, ey = route.end
-        ax.scatter(
-            ex, ey, s=80, marker="s", color="white", edgecolors="black", linewidths=1.4, zorder=7
-        )
-    ax.scatter(
-        *route.start, s=190, marker="*", color="white", edgecolors="black", linewidths=1.2,
-        zorder=8,
-    )  # fmt: skip
-
-
-# --------------------------------------------------------------------------- legend
-class LetterPatch:
-    """Legend handle: a square of a region's colour with its letter."""
-
-    def __init__(self, letter: str, color: Sequence[int]) -> None:
-        self.letter, self.color = letter, tuple(color)
-
-
-class _LetterHandler:
-    def legend_artist(self, legend, orig_handle: LetterPatch, fontsize: float, handlebox):
-        from matplotlib.patches import Rectangle
-        from matplotlib.text import Text
-
-        x0, y0 = handlebox.xdescent, handlebox.ydescent
-        side = min(handlebox.width, handlebox.height * 1.4)
-        square = Rectangle(
-            (x0 + 0.5 * (handlebox.width - side), y0 + 0.5 * handlebox.height - 0.5 * side),
-            side,
-            side,
-            facecolor=_rgb(orig_handle.color),
-            edgecolor=_rgb(GRID_COLOR),
-            linewidth=0.6,
-            transform=handlebox.get_transform(),
-        )
-        text = Text(
-            x0 + 0.5 * handlebox.width,
-            y0 + 0.5 * handlebox.height,
-            orig_handle.letter,
-            ha="center",
-            va="center",
-            fontsize=0.8 * fontsize,
-            weight="bold",
-            color=_text_color(orig_handle.color),
-            transform=handlebox.get_transform(),
-        )
-        handlebox.add_artist(square)
-        handlebox.add_artist(text)
-        return square
-
-
-def region_handles(scenarios: Sequence[Scenario]) -> list[tuple[Any, str]]:
-    """``(handle, text)`` of every region class in ``scenarios`` (each distinct text once)."""
-    out: dict[tuple, tuple[Any, str]] = {}
-    for sc in scenarios:
-        for letter, text, color in legend_entries(sc):
-            out.setdefault((letter, text, color), (LetterPatch(letter, color), text))
-    return list(out.values())
-
-
-def route_handles(routes: Sequence[Route]) -> list[tuple[Any, str]]:
-    """``(handle, text)`` of the route's marks present in ``routes``."""
-    from matplotlib.lines import Line2D
-
-    out: list[tuple[Any, str]] = []
-    phases = {p for r in routes for p in r.phases}
-    for phase, style in _ROUTE_STYLE.items():
-        if phase in phases:
-            line = Line2D(
-                [], [], color=_rgb(PHASE_COLORS[phase]), linewidth=1.4,
-                linestyle=style["linestyle"], path_effects=_halo(2.8, style["halo"]),
-            )  # fmt: skip
-            out.append((line, f"{PHASE_NAMES[phase]} (arrow: direction)"))
-
-    def mark(marker: str, size: float, text: str, face: str = "white") -> None:
-        handle = Line2D(
-            [], [], marker=marker, linestyle="", markersize=size, markerfacecolor=face,
-            markeredgecolor="black", color="black",
-        )  # fmt: skip
-        out.append((handle, text))
-
-    if any(r.backups.any() for r in routes):
-        mark("x", 6, "backup replaced the action", face="black")
-    if any(r.switch_step is not None and r.switch_step < r.n_hops for r in routes):
-        mark("D", 6, "switch to goal reaching")
-    mark("*", 11, "start")
-    if any(r.n_hops for r in routes):
-        mark("s", 7, "end")
-    return out
-
-
-def _legend(target, handles: list[tuple[Any, str]], **kwargs: Any):
-    return target.legend(
-        [h for h, _ in handles],
-        [t for _, t in handles],
-        handler_map={LetterPatch: _LetterHandler()},
-        fontsize=7.5,
-        frameon=False,
-        **kwargs,
-    )
-
-
 # --------------------------------------------------------------------------- figures
 def build_figure(
     panels: Sequence[Panel],
@@ -538,7 +183,7 @@ def build_figure(
         fig = new_figure(size_inches or (8.0, 5.6), dpi)
         ax = fig.add_axes((0.075, 0.09, 0.56, 0.82))
         _draw_panel(ax, panel)
-        _legend(ax, handles, loc="center left", bbox_to_anchor=(1.03, 0.5), borderaxespad=0.0)
+        add_legend(ax, handles, loc="center left", bbox_to_anchor=(1.03, 0.5), borderaxespad=0.0)
         return fig
     cols = max(1, min(columns, len(panels)))
     rows = math.ceil(len(panels) / cols)
@@ -550,7 +195,7 @@ def build_figure(
     )
     for k, panel in enumerate(panels):
         _draw_panel(fig.add_subplot(gs[k // cols, k % cols]), panel)
-    _legend(fig, handles, loc="lower center", ncol=3, bbox_to_anchor=(0.5, 0.005))
+    add_legend(fig, handles, loc="lower center", ncol=3, bbox_to_anchor=(0.5, 0.005))
     return fig
 
 
@@ -575,26 +220,6 @@ def render_figure(
     check_destination(path)
     fig = build_figure(panels, size_inches=size_inches, dpi=dpi, columns=columns)
     return save_figure(fig, path, dpi=dpi, metadata=metadata)
-
-
-def route_cover(scenario: Scenario, route: Route | None) -> np.ndarray:
-    """``(nx, ny)``: how much each cell is covered by the start mark and the route (its
-    track points, and its end and switch marks heavily), for placing letters."""
-    w = scenario.world
-    cover = np.zeros((w.nx, w.ny))
-
-    def add(points: np.ndarray, weight: float) -> None:
-        ij = np.floor(np.atleast_2d(points) / w.cell).astype(np.int64)
-        ok = (ij[:, 0] >= 0) & (ij[:, 0] < w.nx) & (ij[:, 1] >= 0) & (ij[:, 1] < w.ny)
-        np.add.at(cover, (ij[ok, 0], ij[ok, 1]), weight)
-
-    add(np.asarray(scenario.start), 1e6)
-    if route is not None and route.n_hops:
-        add(np.concatenate(route.tracks), 1.0)
-        add(route.end, 1e6)
-        if route.switch_step is not None and route.switch_step < route.n_hops:
-            add(route.tracks[route.switch_step][0], 1e6)
-    return cover
 
 
 def _draw_panel(ax: Axes, panel: Panel) -> None:

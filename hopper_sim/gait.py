@@ -15,11 +15,12 @@ import numpy as np
 from scipy.optimize import brentq
 
 from hopper_sim.batch import simulate_hops
+from hopper_sim.errors import HopperSimError
 from hopper_sim.hop import simulate_hop
 from hopper_sim.model import HopperModel
 
 
-class GaitError(ValueError):
+class GaitError(HopperSimError, ValueError):
     """No steady gait exists for the requested interstitial velocity or hop length."""
 
 

@@ -24,6 +24,9 @@ import numpy as np
 
 from hopper_sim import slip
 from hopper_sim import thrust as thrust_law
+from hopper_sim.errors import HopperSimError
+from hopper_sim.hop_checks import HopInputError, implausible, validate_inputs, validate_range
+from hopper_sim.hop_checks import max_speed as max_speed  # re-exported
 from hopper_sim.model import HopperModel
 from hopper_sim.terrain import ForceField
 
@@ -43,21 +46,9 @@ STATUS_CODES: dict[str, int] = {name: i for i, name in enumerate(STATUS_NAMES)}
 MAX_STANCE_TIME = 2.0
 #: Samples of each ballistic phase in ``HopResult.com_path``.
 PATH_SAMPLES = 16
-#: Fewest integration steps in which the leg may sweep its rest length: it bounds the speeds
-#: a hop accepts, ``|v_xy|, |v_z| <= l0 / (MIN_SWEEP_STEPS * dt)`` (50 m/s for the shipped
-#: model, six times the controller's training box; beyond it a stance spans a few steps).
-MIN_SWEEP_STEPS = 20
-#: Largest landing noise |nu_x|, |nu_y| a hop accepts, in leg rest lengths (the model's
-#: noise is truncated at 0.2 l0).
-MAX_NOISE_LEGS = 1.0
-#: Largest |x|, |y| of a hop's start [m].
-MAX_POSITION = 1.0e6
-#: Relative energy change allowed in a passive hop (no thrust, terrain force or noise): the
-#: spring-mass stance conserves energy (RK4 drifts by about 1e-9).
-PASSIVE_ENERGY_TOLERANCE = 1.0e-4
 
 
-class HopFailure(Exception):
+class HopFailure(HopperSimError):
     """A hop failed; ``reason`` is one of :data:`STATUS_NAMES` other than ``"ok"``:
 
     * ``no_touchdown``: the leg would not be compressed at touchdown, or the flight after
@@ -66,17 +57,13 @@ class HopFailure(Exception):
     * ``ground``: the CoM reached the ground (z <= 0) in stance;
     * ``unstable``: the integration produced a non-finite state or a MuJoCo warning;
     * ``non_physical``: the result is not physical (times out of order or negative, or a
-      passive hop whose energy changed; :func:`implausible`).
+      passive hop whose energy changed; :func:`hopper_sim.hop_checks.implausible`).
     """
 
     def __init__(self, reason: str, message: str) -> None:
         super().__init__(f"{reason}: {message}")
         self.reason = reason
         self.message = message
-
-
-class HopInputError(ValueError):
-    """Invalid hop input (shape, non-finite value, angle or vertical velocity out of range)."""
 
 
 @dataclass
@@ -152,91 +139,6 @@ class HopResult:
             "noise": vec(self.noise),
             "thrust_command": float(self.thrust_command),
         }
-
-
-def validate_inputs(
-    pos: np.ndarray, vel: np.ndarray, alpha: np.ndarray, beta: np.ndarray, what: str = "hop"
-) -> None:
-    """Raise :class:`HopInputError` naming the offending input (and row, for batches)."""
-    n = pos.shape[0]
-    if pos.ndim != 2 or pos.shape[1] != 2:
-        raise HopInputError(f"{what}: pos must have shape (N, 2) or (2,), got {pos.shape}")
-    if vel.shape != (n, 3):
-        raise HopInputError(f"{what}: vel must have shape ({n}, 3) or (3,), got {vel.shape}")
-    for name, arr in (("alpha", alpha), ("beta", beta)):
-        if arr.shape != (n,):
-            raise HopInputError(f"{what}: {name} must have shape ({n},), got {arr.shape}")
-    for name, arr in (("pos", pos), ("vel", vel), ("alpha", alpha), ("beta", beta)):
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            row = int(np.argwhere(bad)[0][0])
-            raise HopInputError(f"{what}: {name} is not finite at row {row}: {arr[row]}")
-    bad = (alpha <= 0.0) | (alpha > np.pi / 2)
-    if bad.any():
-        row = int(np.argmax(bad))
-        raise HopInputError(f"{what}: alpha must lie in (0, pi/2], row {row}: {alpha[row]}")
-    bad = vel[:, 2] > 0.0
-    if bad.any():
-        row = int(np.argmax(bad))
-        raise HopInputError(
-            f"{what}: the interstitial state descends (vz <= 0), row {row}: vz = {vel[row, 2]}"
-        )
-
-
-def max_speed(params) -> float:
-    """The largest horizontal and vertical speed [m/s] a hop accepts (:data:`MIN_SWEEP_STEPS`)."""
-    return params.rest_length / (MIN_SWEEP_STEPS * params.timestep)
-
-
-def validate_range(
-    params, pos: np.ndarray, vel: np.ndarray, beta: np.ndarray, noise, what: str = "hop"
-) -> None:
-    """Raise :class:`HopInputError` for inputs outside the model's valid range: speeds
-    beyond :func:`max_speed`, an azimuth outside [-pi, pi], noise beyond
-    :data:`MAX_NOISE_LEGS` leg lengths, a start beyond :data:`MAX_POSITION`."""
-    v_max = max_speed(params)
-    checks = [
-        ("|pos|", np.abs(pos).max(axis=1), MAX_POSITION, "m"),
-        ("the horizontal speed", np.hypot(vel[:, 0], vel[:, 1]), v_max, "m/s"),
-        ("|vz|", np.abs(vel[:, 2]), v_max, "m/s"),
-        ("|beta|", np.abs(beta), np.pi, "rad"),
-    ]
-    if noise is not None:
-        checks.append(
-            ("|noise|", np.abs(noise).max(axis=1), MAX_NOISE_LEGS * params.rest_length, "m")
-        )
-    for name, value, limit, unit in checks:
-        bad = ~(value <= limit)
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise HopInputError(
-                f"{what}: {name} = {value[row]:.6g} {unit} at row {row} is outside the model's "
-                f"valid range (at most {limit:.6g} {unit})"
-            )
-
-
-def implausible(
-    touchdown_time: np.ndarray,
-    liftoff_time: np.ndarray,
-    flight_time: np.ndarray,
-    energy_before: np.ndarray,
-    energy_after: np.ndarray,
-    passive: np.ndarray,
-) -> np.ndarray:
-    """Mask of hop results that are not physical: a time that is not finite, negative or out
-    of order (touchdown <= liftoff, flight > 0), a non-finite energy, or a passive hop whose
-    energy changed by more than :data:`PASSIVE_ENERGY_TOLERANCE`."""
-    times_ok = (
-        np.isfinite(touchdown_time)
-        & np.isfinite(liftoff_time)
-        & np.isfinite(flight_time)
-        & (touchdown_time >= 0.0)
-        & (liftoff_time >= touchdown_time)
-        & (flight_time > 0.0)
-    )
-    energy_ok = np.isfinite(energy_after)
-    drift = np.abs(energy_after - energy_before) > PASSIVE_ENERGY_TOLERANCE * np.abs(energy_before)
-    return ~times_ok | ~energy_ok | (passive & drift)
 
 
 def _as_hop_inputs(pos, vel, alpha, beta, noise):
@@ -319,6 +221,39 @@ def _run_stance(
     return _Stance("no_liftoff", f"leg not back at l0 after {MAX_STANCE_TIME} s of stance", n + 1)
 
 
+def _record_descent(
+    result: HopResult, p, pos: np.ndarray, vel: np.ndarray, td: slip.Touchdown
+) -> np.ndarray:
+    """Sample the ballistic descent into ``result.com_path`` (and its times); returns it."""
+    ts = np.linspace(0.0, td.time[0], PATH_SAMPLES)
+    start = np.array([[pos[0, 0], pos[0, 1], p.rest_length]])
+    descent, _ = slip.ballistic(
+        np.repeat(start, ts.size, 0), np.repeat(vel, ts.size, 0), ts, p.gravity
+    )
+    result.com_path, result.com_path_time = descent, ts
+    return descent
+
+
+def _record_whole_path(
+    result: HopResult,
+    p,
+    descent: np.ndarray,
+    st: _Stance,
+    td: slip.Touchdown,
+    p_lo: np.ndarray,
+    fl,
+    t_lo: float,
+) -> None:
+    """``result.com_path`` (and its times): the descent, the stance steps, the flight."""
+    t_stance = td.time[0] + p.timestep * np.arange(len(st.path))
+    ts = np.linspace(0.0, fl.duration[0], PATH_SAMPLES)
+    fpos, _ = slip.ballistic(
+        np.repeat(p_lo, ts.size, 0), np.repeat(fl.liftoff_vel, ts.size, 0), ts, p.gravity
+    )
+    result.com_path = np.concatenate([descent[:-1], np.asarray(st.path), fpos])
+    result.com_path_time = np.concatenate([result.com_path_time[:-1], t_stance, t_lo + ts])
+
+
 def _hop_with_command(
     hm: HopperModel,
     data: mujoco.MjData,
@@ -352,12 +287,7 @@ def _hop_with_command(
         thrust_command=float(c),
         noise=nu[0].copy(),
     )
-    descent = None
-    if record:
-        ts = np.linspace(0.0, td.time[0], PATH_SAMPLES)
-        start = np.array([[pos[0, 0], pos[0, 1], p.rest_length]])
-        descent, _ = slip.ballistic(np.repeat(start, ts.size, 0), np.repeat(vel, ts.size, 0), ts, g)
-        result.com_path, result.com_path_time = descent, ts
+    descent = _record_descent(result, p, pos, vel, td) if record else None
     if not td.leg_rate[0] < 0.0:
         result.status = "no_touchdown"
         result.message = f"the leg is not compressed at touchdown (ldot = {td.leg_rate[0]:.4g} m/s)"
@@ -402,13 +332,7 @@ def _hop_with_command(
         )
         return result
     if record:
-        t_stance = td.time[0] + p.timestep * np.arange(len(st.path))
-        ts = np.linspace(0.0, fl.duration[0], PATH_SAMPLES)
-        fpos, _ = slip.ballistic(
-            np.repeat(p_lo, ts.size, 0), np.repeat(fl.liftoff_vel, ts.size, 0), ts, g
-        )
-        result.com_path = np.concatenate([descent[:-1], np.asarray(st.path), fpos])
-        result.com_path_time = np.concatenate([result.com_path_time[:-1], t_stance, t_lo + ts])
+        _record_whole_path(result, p, descent, st, td, p_lo, fl, t_lo)
     return result
 
 

@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from hopper_sim import constants as C
+from hopper_sim.errors import HopperSimError
 
 # dm_control picks an OpenGL backend at import; the simulation never renders, so unless the
 # caller chose a backend, import it without one (this also avoids a GLFW warning headless).
@@ -24,7 +25,7 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 from dm_control import mjcf
 
 
-class HopperModelError(ValueError):
+class HopperModelError(HopperSimError, ValueError):
     """A model file or an override is invalid (names the file, key or value)."""
 
 

@@ -36,6 +36,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hopper_sim.errors import HopperSimError
+
 if TYPE_CHECKING:
     from planner.scenario import Scenario
 
@@ -50,7 +52,7 @@ FIELDS: tuple[str, ...] = (
 )
 
 
-class ProvenanceError(ValueError):
+class ProvenanceError(HopperSimError, ValueError):
     """A result belongs to another scenario (or carries no provenance to tell)."""
 
 

@@ -9,7 +9,8 @@ written with ``send_columns`` (one call per entity for up to ``flush_every`` hop
 synthesis, at the run's end and on close. Every hop adds a bounded amount of data (its CoM
 samples are thinned to at most ``com_samples``), so a recording grows linearly with the
 hops. :func:`summarize_recording` and :func:`read_runs` read a recording back with rerun's own
-reader (``rerun.chunk.RrdReader``).
+reader (``rerun.chunk.RrdReader``). The static world is written by
+:mod:`hopper_sim.recording_world`, the hop columns by :mod:`hopper_sim.recording_hops`.
 
 Runs are numbered from 1 (``K = RunStart.run_index + 1``), as in the summary table of
 ``hopnav run``, in ``hopnav replay``, in figure titles and in the entity paths below.
@@ -102,7 +103,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import shutil
 import weakref
@@ -112,22 +112,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import rerun as rr
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
 from hopper_sim.provenance import as_text
-from hopper_sim.rerun_blueprint import blueprint, legend_markdown
-from hopper_sim.styles import (
-    GRID_COLOR,
-    INITIAL_COLOR,
-    INITIAL_LETTER,
-    PHASE_CODES,
-    PHASE_COLORS,
-    PHASE_NAMES,
-    draw_order,
-    format_reward,
-    label_colors,
-    region_components,
-    region_letters,
-)
+from hopper_sim.recording_hops import hop_duration, is_number, is_scalar, send_hops
+from hopper_sim.recording_world import log_world
+from hopper_sim.recording_world import scenario_record as scenario_record  # re-exported
+from hopper_sim.rerun_blueprint import blueprint
 from planner._util.atomic import new_temporary_folder
 
 if TYPE_CHECKING:
@@ -135,83 +126,18 @@ if TYPE_CHECKING:
     from planner.scenario import Scenario
 
 APPLICATION_ID = "hopnav"
-_FLOOR_Z = 0.0
-_MIN_DURATION = 1e-6
-_CELL_ALPHA = 170
 
-_HOP_FIELDS = {f.name for f in dataclasses.fields(HopEvent)}
 _SYNTHESIS_FIELDS = {f.name for f in dataclasses.fields(SynthesisEvent)}
 _END_FIELDS = {f.name for f in dataclasses.fields(RunEnd)}
 
 
-class RecordingError(ValueError):
+class RecordingError(HopperSimError, ValueError):
     """A recording cannot be written or read (missing, corrupt or truncated file...)."""
 
 
 def run_path(run_index: int) -> str:
     """Entity path of the run with 0-based ``run_index``: ``run_<run_index + 1>``."""
     return f"run_{run_index + 1}"
-
-
-def hop_duration(event: HopEvent) -> float:
-    """Simulated duration of a hop, s: its last CoM sample time (departure to the next
-    interstitial state), else its touchdown time; at least 1 us."""
-    if event.com_time is not None and len(event.com_time):
-        t = float(event.com_time[-1])
-    else:
-        t = float(event.touchdown_time)
-    return t if math.isfinite(t) and t > _MIN_DURATION else _MIN_DURATION
-
-
-def _status_line(h: HopEvent) -> str:
-    backup = f" (backup for {h.requested_action})" if h.backup else ""
-    return (
-        f"hop {h.step + 1}: {PHASE_NAMES.get(h.phase, h.phase)}, {h.source} action "
-        f"{h.executed_action}{backup}, P-check {h.p_worst:.3f}, reward {h.reward:+g} "
-        f"(total {h.total_reward:+g})"
-    )
-
-
-def _thin(n: int, most: int) -> np.ndarray:
-    """At most ``most`` indices of ``range(n)``, evenly spread, first and last kept."""
-    if n <= most:
-        return np.arange(n)
-    return np.unique(np.round(np.linspace(0, n - 1, most)).astype(np.int64))
-
-
-def _scalar(value: Any) -> bool:
-    return isinstance(value, bool | int | float | str | np.integer | np.floating)
-
-
-def _number(value: Any) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def scenario_record(sc: Scenario) -> dict[str, Any]:
-    """``sc`` as the dict :func:`planner.scenario.scenario_from_dict` reads (the TOML schema)."""
-
-    def region(r) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        if r.rects:
-            out["rects"] = [list(map(float, x)) for x in r.rects]
-        if r.cells:
-            out["cells"] = [list(map(int, x)) for x in r.cells]
-        return out
-
-    return {
-        "name": sc.name,
-        "description": sc.description,
-        "formula": sc.formula,
-        "hazard": sc.hazard,
-        "goal": sc.goal,
-        "p_sat": float(sc.p_sat),
-        "reward_known": bool(sc.reward_known),
-        "world": {"size": [float(sc.world.width), float(sc.world.height)], "cell": sc.world.cell},
-        "initial": {**region(sc.initial), "start": [float(v) for v in sc.start]},
-        "regions": {label: region(r) for label, r in sc.regions.items()},
-        "rewards": {k: float(v) for k, v in sc.rewards.items()},
-        "runner": dataclasses.asdict(sc.runner),
-    }
 
 
 class RerunRecorder(Observer):
@@ -320,87 +246,8 @@ class RerunRecorder(Observer):
 
     # -- the world -------------------------------------------------------------------
     def _log_world(self, sc: Scenario) -> None:
-        w = sc.world
-        rec = self._rec
-        self._cell = float(w.cell)
-        rec.log(
-            "world/scenario",
-            rr.AnyValues(scenario_json=json.dumps(scenario_record(sc), sort_keys=True)),
-            static=True,
-        )
-        info = (
-            f"# Scenario {sc.name}\n\n{sc.description}\n\n"
-            f"- world: {w.width} x {w.height} m, cells of {w.cell} m ({w.nx} x {w.ny})\n"
-            f"- formula: `{sc.formula}`; hazard label `{sc.hazard}`, goal label `{sc.goal}`\n"
-            f"- P_sat = {sc.p_sat}; reward known: {sc.reward_known}\n"
-            f"- rewards: {dict(sc.rewards)}\n- runner: {sc.runner}\n"
-        )
-        rec.log("world/info", rr.TextDocument(info, media_type="text/markdown"), static=True)
-        rec.log(
-            "world/legend",
-            rr.TextDocument(legend_markdown(sc), media_type="text/markdown"),
-            static=True,
-        )
-        rec.log(
-            "world/ground",
-            rr.Boxes3D(
-                centers=[[0.5 * w.width, 0.5 * w.height, _FLOOR_Z - 0.02]],
-                half_sizes=[[0.5 * w.width, 0.5 * w.height, 0.01]],
-                colors=[(250, 250, 250)],
-                fill_mode="solid",
-            ),
-            static=True,
-        )
-        xs = np.arange(w.nx + 1) * w.cell
-        ys = np.arange(w.ny + 1) * w.cell
-        strips = [[[x, 0.0, _FLOOR_Z + 0.006], [x, w.height, _FLOOR_Z + 0.006]] for x in xs]
-        strips += [[[0.0, y, _FLOOR_Z + 0.006], [w.width, y, _FLOOR_Z + 0.006]] for y in ys]
-        rec.log(
-            "world/grid", rr.LineStrips3D(strips, colors=[GRID_COLOR], radii=[0.004]), static=True
-        )
-        centers = w.geometry.centres().reshape(w.nx, w.ny, 2)
-        half = [0.5 * w.cell, 0.5 * w.cell, 0.005]
-
-        def boxes(mask: np.ndarray, color) -> rr.Boxes3D:
-            c = centers[mask]
-            return rr.Boxes3D(
-                centers=np.column_stack([c, np.full(len(c), _FLOOR_Z)]),
-                half_sizes=np.tile(half, (len(c), 1)),
-                colors=[(*color, _CELL_ALPHA)],
-                fill_mode="solid",
-            )
-
-        rec.log("world/cells/initial", boxes(sc.initial_mask, INITIAL_COLOR), static=True)
-        colors = label_colors(sc.labels, sc.goal, sc.hazard)
-        for label in sc.regions:
-            rec.log(
-                f"world/cells/{label}", boxes(sc.region_mask(label), colors[label]), static=True
-            )
-        letters = region_letters(sc.labels)
-        spots, texts, tints = [], [], []
-        for label in ["initial", *draw_order(sc.labels, sc.goal, sc.hazard)]:
-            if label == "initial":
-                mask, text, color = sc.initial_mask, f"{INITIAL_LETTER} initial", INITIAL_COLOR
-            else:
-                mask = sc.region_mask(label)
-                reward = float(sc.rewards.get(label, 0.0))
-                text = f"{letters[label]} {label} {format_reward(reward)}"
-                color = colors[label]
-            for i, j in region_components(mask):
-                spots.append([*centers[i, j], 0.06])
-                texts.append(text)
-                tints.append(color)
-        if spots:
-            rec.log(
-                "world/regions",
-                rr.Points3D(spots, labels=texts, colors=tints, radii=[0.05], show_labels=True),
-                static=True,
-            )
-        rec.log(
-            "world/start",
-            rr.Points3D([[*sc.start, 0.05]], colors=[(255, 255, 255)], radii=[0.15]),
-            static=True,
-        )
+        self._cell = float(sc.world.cell)
+        log_world(self._rec, sc)
 
     # -- observer handlers -----------------------------------------------------------
     def on_run_start(self, event: RunStart) -> None:
@@ -436,153 +283,8 @@ class RerunRecorder(Observer):
     def _flush_hops(self, k: int) -> None:
         """Write the buffered hops of run ``k`` with one ``send_columns`` per entity."""
         pending = self._pending.pop(k, [])
-        if not pending:
-            return
-        hops = [h for h, _ in pending]
-        starts = np.array([t for _, t in pending])
-        durations = np.array([hop_duration(h) for h in hops])
-        base, send, n = run_path(k), self._rec.send_columns, len(hops)
-        steps = np.array([h.step for h in hops], dtype=np.int64)
-        at_end = [
-            rr.TimeColumn("hop", sequence=steps + 1),
-            rr.TimeColumn("sim_time", duration=starts + durations),
-        ]
-        at_touchdown = [
-            rr.TimeColumn("hop", sequence=steps + 1),
-            rr.TimeColumn(
-                "sim_time",
-                duration=starts + np.minimum([h.touchdown_time for h in hops], durations),
-            ),
-        ]
-        samples = [self._thinned(h) for h in hops]
-        arcs = [s[0] for s in samples]
-
-        def rows(value) -> np.ndarray:
-            return np.tile(np.asarray(value), (n, 1))
-
-        send(
-            f"{base}/hop/com_arc",
-            at_end,
-            rr.LineStrips3D.columns(strips=arcs, colors=rows((60, 60, 60)), radii=np.full(n, 0.01)),
-        )
-        feet = np.array([h.foot for h in hops])
-        send(
-            f"{base}/hop/foot",
-            at_touchdown,
-            rr.Points3D.columns(positions=feet, colors=rows((0, 0, 0)), radii=np.full(n, 0.05)),
-        )
-        legs = [np.stack([h.foot, self._com_at_touchdown(h)]) for h in hops]
-        send(
-            f"{base}/hop/leg",
-            at_touchdown,
-            rr.LineStrips3D.columns(strips=legs, colors=rows((0, 0, 0)), radii=np.full(n, 0.02)),
-        )
-        targets = np.column_stack([[h.target for h in hops], np.full(n, 0.02)])
-        send(
-            f"{base}/hop/target",
-            at_touchdown,
-            rr.Points3D.columns(
-                positions=targets, colors=rows((120, 120, 120)), radii=np.full(n, 0.08)
-            ),
-        )
-        landings = np.column_stack([[h.landing for h in hops], np.full(n, 0.03)])
-        phase_colors = np.array([PHASE_COLORS.get(h.phase, (128, 128, 128)) for h in hops])
-        send(
-            f"{base}/hop/landing",
-            at_end,
-            rr.Points3D.columns(positions=landings, colors=phase_colors, radii=np.full(n, 0.06)),
-        )
-        departures = np.column_stack([[h.start_pos for h in hops], np.full(n, 0.03)])
-        send(
-            f"{base}/route",
-            at_end,
-            rr.LineStrips3D.columns(
-                strips=np.stack([departures, landings], axis=1),
-                colors=phase_colors,
-                radii=np.full(n, 0.025),
-            ),
-        )
-        send(
-            f"{base}/hops",
-            at_end,
-            rr.AnyValues.columns(
-                step=steps,
-                phase=[h.phase for h in hops],
-                source=[h.source for h in hops],
-                backup=np.array([h.backup for h in hops], dtype=bool),
-                requested_action=[h.requested_action for h in hops],
-                executed_action=[h.executed_action for h in hops],
-                cell=np.array([h.cell for h in hops], dtype=np.int64),
-                product_state=np.array([h.product_state for h in hops], dtype=np.int64),
-                p_worst=np.array([h.p_worst for h in hops], dtype=float),
-                reward=np.array([h.reward for h in hops], dtype=float),
-                total_reward=np.array([h.total_reward for h in hops], dtype=float),
-                duration=durations,
-                **_extra_columns(hops),
-            ),
-        )
-        send(
-            f"{base}/status",
-            at_end,
-            rr.TextLog.columns(
-                text=[_status_line(h) for h in hops],
-                level=["WARN" if h.backup else "INFO" for h in hops],
-            ),
-        )
-        plots = {
-            "p_worst": [h.p_worst for h in hops],
-            "total_reward": [h.total_reward for h in hops],
-            "reward": [h.reward for h in hops],
-            "phase": [PHASE_CODES.get(h.phase, np.nan) for h in hops],
-            "rl_action": [1.0 if h.source == "RL" else 0.0 for h in hops],
-            "backup": [1.0 if h.backup else 0.0 for h in hops],
-        }
-        for name, values in plots.items():
-            send(f"{base}/plots/{name}", at_end, rr.Scalars.columns(scalars=np.asarray(values)))
-        timed = [(s, t0) for s, t0 in zip(samples, starts, strict=True) if s[1] is not None]
-        if timed:
-            send(
-                f"{base}/com",
-                [
-                    rr.TimeColumn(
-                        "sim_time", duration=np.concatenate([t0 + s[1] for s, t0 in timed])
-                    ),
-                    rr.TimeColumn(
-                        "hop",
-                        sequence=np.concatenate(
-                            [
-                                np.full(len(s[0]), h.step + 1)
-                                for (s, _), h in zip(timed, hops, strict=False)
-                            ]
-                        ),
-                    ),
-                ],
-                rr.Points3D.columns(positions=np.concatenate([s[0] for s, _ in timed])),
-            )
-
-    def _thinned(self, event: HopEvent) -> tuple[np.ndarray, np.ndarray | None]:
-        """The hop's CoM samples (and their times since departure) thinned to
-        ``com_samples``; a hop without samples gets its departure and landing."""
-        path = event.com_path
-        if len(path) < 2:
-            z = path[0, 2] if len(path) else 1.0
-            return np.array([[*event.start_pos, z], [*event.landing, z]]), None
-        idx = _thin(len(path), self.com_samples)
-        times = None if event.com_time is None else np.asarray(event.com_time)[idx]
-        return path[idx], times
-
-    @staticmethod
-    def _com_at_touchdown(event: HopEvent) -> np.ndarray:
-        """CoM at touchdown: interpolated in ``com_time`` if given, else the path point
-        nearest to the foot (the CoM is above the foot at touchdown, at leg length)."""
-        path = event.com_path
-        if not len(path):
-            return np.asarray(event.foot) + np.array([0.0, 0.0, 1.0])
-        if event.com_time is not None and len(path) > 1:
-            return np.array(
-                [np.interp(event.touchdown_time, event.com_time, path[:, d]) for d in range(3)]
-            )
-        return path[np.argmin(np.linalg.norm(path - event.foot, axis=1))]
+        if pending:
+            send_hops(self._rec, run_path(k), pending, self.com_samples)
 
     def on_synthesis(self, event: SynthesisEvent) -> None:
         """Log the GP maps, the initial state's worst-case probability and stage timings."""
@@ -616,13 +318,13 @@ class RerunRecorder(Observer):
         extra: dict[str, Any] = {}
         for name in sorted({f.name for f in dataclasses.fields(event)} - _SYNTHESIS_FIELDS):
             value = getattr(event, name)
-            if _number(value):
+            if is_number(value):
                 rec.log(f"{base}/synthesis/{name}", rr.Scalars(float(value)))
-            elif isinstance(value, dict) and all(_number(v) for v in value.values()):
+            elif isinstance(value, dict) and all(is_number(v) for v in value.values()):
                 for key, v in value.items():
                     rec.log(f"{base}/synthesis/{name}/{key}", rr.Scalars(float(v)))
             elif value is not None:
-                extra[name] = value if _scalar(value) else json.dumps(_jsonable(value))
+                extra[name] = value if is_scalar(value) else json.dumps(_jsonable(value))
         if extra:
             rec.log(f"{base}/synthesis", rr.AnyValues(**extra))
 
@@ -676,7 +378,7 @@ class RerunRecorder(Observer):
         extra = {
             name: getattr(event, name)
             for name in sorted({f.name for f in dataclasses.fields(event)} - _END_FIELDS)
-            if _scalar(getattr(event, name))
+            if is_scalar(getattr(event, name))
         }
         rec.log(
             f"{base}/summary",
@@ -708,21 +410,7 @@ def _jsonable(value: Any) -> Any:
         return [_jsonable(v) for v in value]
     if isinstance(value, np.generic):
         return value.item()
-    return value if value is None or _scalar(value) else str(value)
-
-
-def _extra_columns(hops: list[HopEvent]) -> dict[str, Any]:
-    """Columns for HopEvent fields this recorder does not know: each that holds the same
-    scalar type (bool, int, float, str) in every hop; others are left out."""
-    out: dict[str, Any] = {}
-    names = {f.name for f in dataclasses.fields(hops[0])} - _HOP_FIELDS
-    for name in sorted(names):
-        values = [getattr(h, name) for h in hops]
-        kinds = {type(v) for v in values}
-        if len(kinds) != 1 or not _scalar(values[0]):
-            continue
-        out[name] = values if isinstance(values[0], str) else np.asarray(values)
-    return out
+    return value if value is None or is_scalar(value) else str(value)
 
 
 def _color_map(values: np.ndarray, cmap: str, low: float, high: float) -> np.ndarray:

@@ -48,6 +48,37 @@ def blueprint(runs: list[int], *, timeline: str = "sim_time"):
     """
     import rerun.blueprint as rrb
 
+    tabs = [_tab(k) for k in runs] or [rrb.Spatial3DView(origin="/world", name="world")]
+    return rrb.Blueprint(
+        rrb.Tabs(*tabs) if len(tabs) > 1 else tabs[0],
+        rrb.TimePanel(timeline=timeline, state="expanded"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        collapse_panels=False,
+    )
+
+
+def _tab(k: int) -> Any:
+    """The tab of run ``k``: world, legend and outcome on the left, plots on the right."""
+    import rerun.blueprint as rrb
+
+    below = rrb.Horizontal(
+        rrb.TextDocumentView(origin="/world/legend", name="legend"),
+        rrb.TextDocumentView(origin=f"/run_{k}/outcome", name="outcome"),
+        column_shares=[3, 2],
+    )
+    return rrb.Horizontal(
+        rrb.Vertical(_world_view(k), below, row_shares=[4, 1]),
+        _plots(k),
+        column_shares=[3, 2],
+        name=f"run {k}",
+    )
+
+
+def _world_view(k: int) -> Any:
+    """The 3D world of run ``k``; its route and CoM arcs shown up to the time cursor."""
+    import rerun.blueprint as rrb
+
     until_cursor = rrb.VisibleTimeRanges(
         [
             rrb.VisibleTimeRange(
@@ -58,70 +89,58 @@ def blueprint(runs: list[int], *, timeline: str = "sim_time"):
             for name in ("sim_time", "hop")
         ]
     )
+    return rrb.Spatial3DView(
+        origin="/",
+        contents=[
+            "+ /world/**",
+            f"+ /run_{k}/hop/**",
+            f"+ /run_{k}/route",
+            f"+ /run_{k}/com",
+            f"+ /run_{k}/gp/mean_field",
+        ],
+        name=f"world, run {k}",
+        overrides={
+            f"/run_{k}/route": until_cursor,
+            f"/run_{k}/hop/com_arc": until_cursor,
+        },
+    )
 
-    def series(k: int, paths: list[str], title: str, axis=None) -> Any:
-        return rrb.TimeSeriesView(
-            origin=f"/run_{k}/plots",
-            contents=[f"/run_{k}/plots/{p}" for p in paths],
-            name=title,
-            axis_y=None if axis is None else rrb.ScalarAxis(range=axis),
-            plot_legend=rrb.PlotLegend(visible=len(paths) > 1),
-        )
 
-    def tab(k: int) -> Any:
-        world = rrb.Spatial3DView(
-            origin="/",
-            contents=[
-                "+ /world/**",
-                f"+ /run_{k}/hop/**",
-                f"+ /run_{k}/route",
-                f"+ /run_{k}/com",
-                f"+ /run_{k}/gp/mean_field",
-            ],
-            name=f"world, run {k}",
-            overrides={
-                f"/run_{k}/route": until_cursor,
-                f"/run_{k}/hop/com_arc": until_cursor,
-            },
-        )
-        below = rrb.Horizontal(
-            rrb.TextDocumentView(origin="/world/legend", name="legend"),
-            rrb.TextDocumentView(origin=f"/run_{k}/outcome", name="outcome"),
-            column_shares=[3, 2],
-        )
-        gp = rrb.Tabs(
-            *(
-                rrb.Spatial2DView(origin=f"/run_{k}/gp/image/{m}", name=f"GP {m}")
-                for m in ("mean_x", "mean_y", "std_x", "std_y")
-            ),
-            name="GP maps",
-        )
-        right = rrb.Vertical(
-            series(
-                k,
-                ["p_worst", "p_worst_current", "p_worst_initial"],
-                "P-check (worst-case satisfaction)",
-                (0, 1),
-            ),
-            series(k, ["total_reward", "reward"], "reward"),
-            series(k, ["phase"], "phase (0 explore, 1 goal, 2 fallback)", (-0.1, 2.1)),
-            series(k, ["rl_action"], "RL action", (-0.1, 1.1)),
-            series(k, ["backup"], "backup", (-0.1, 1.1)),
-            gp,
-            row_shares=[2, 2, 1, 1, 1, 3],
-        )
-        return rrb.Horizontal(
-            rrb.Vertical(world, below, row_shares=[4, 1]),
-            right,
-            column_shares=[3, 2],
-            name=f"run {k}",
-        )
+def _plots(k: int) -> Any:
+    """The time series of run ``k`` stacked above its GP maps."""
+    import rerun.blueprint as rrb
 
-    tabs = [tab(k) for k in runs] or [rrb.Spatial3DView(origin="/world", name="world")]
-    return rrb.Blueprint(
-        rrb.Tabs(*tabs) if len(tabs) > 1 else tabs[0],
-        rrb.TimePanel(timeline=timeline, state="expanded"),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        collapse_panels=False,
+    gp = rrb.Tabs(
+        *(
+            rrb.Spatial2DView(origin=f"/run_{k}/gp/image/{m}", name=f"GP {m}")
+            for m in ("mean_x", "mean_y", "std_x", "std_y")
+        ),
+        name="GP maps",
+    )
+    return rrb.Vertical(
+        _series(
+            k,
+            ["p_worst", "p_worst_current", "p_worst_initial"],
+            "P-check (worst-case satisfaction)",
+            (0, 1),
+        ),
+        _series(k, ["total_reward", "reward"], "reward"),
+        _series(k, ["phase"], "phase (0 explore, 1 goal, 2 fallback)", (-0.1, 2.1)),
+        _series(k, ["rl_action"], "RL action", (-0.1, 1.1)),
+        _series(k, ["backup"], "backup", (-0.1, 1.1)),
+        gp,
+        row_shares=[2, 2, 1, 1, 1, 3],
+    )
+
+
+def _series(k: int, paths: list[str], title: str, axis=None) -> Any:
+    """A time-series view of the plots ``paths`` of run ``k`` (y range ``axis`` if given)."""
+    import rerun.blueprint as rrb
+
+    return rrb.TimeSeriesView(
+        origin=f"/run_{k}/plots",
+        contents=[f"/run_{k}/plots/{p}" for p in paths],
+        name=title,
+        axis_y=None if axis is None else rrb.ScalarAxis(range=axis),
+        plot_legend=rrb.PlotLegend(visible=len(paths) > 1),
     )

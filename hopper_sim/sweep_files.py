@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.events import OUTCOMES
 from hopper_sim.provenance import as_text
 from hopper_sim.sweep import (
@@ -39,7 +40,7 @@ MARKDOWN_FILE = "table_i.md"
 MAX_CSV_BYTES = 1 << 28
 
 
-class SweepFileError(ValueError):
+class SweepFileError(HopperSimError, ValueError):
     """A sweep CSV file is malformed; the message names the file, line and column."""
 
 

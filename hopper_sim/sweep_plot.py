@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hopper_sim.figures import PNG_DPI, FigureError, check_destination, new_figure, save_figure
+from hopper_sim.figure_files import PNG_DPI, FigureError, check_destination, new_figure, save_figure
 
 if TYPE_CHECKING:
     from hopper_sim.sweep import CellSummary
@@ -52,7 +52,7 @@ def write_table_plot(
 ) -> Path:
     """Draw the Table I plot of ``cells`` (:func:`build_table_plot`) and write it to ``path``
     (``.png``, ``.svg`` or ``.pdf``; its folder must exist), with ``metadata`` (e.g. the
-    sweep's provenance) as in :func:`~hopper_sim.figures.save_figure`.
+    sweep's provenance) as in :func:`~hopper_sim.figure_files.save_figure`.
 
     Raises:
         FigureError: no cells, an unknown extension or a missing folder.
@@ -90,60 +90,9 @@ def build_table_plot(cells: Sequence[CellSummary], *, title: str = "", dpi: int 
         every: list[float] = []
         for i, c in enumerate(cs):
             row = sorted((s for s in cells if s.c == c), key=lambda s: s.eps)
-            x = np.array([s.eps for s in row]) + (i - 0.5 * (len(cs) - 1)) * spread
-            mean, half = _values(row, attr)
-            color, marker = SERIES_COLORS[i % len(SERIES_COLORS)], _MARKERS[i % len(_MARKERS)]
-            ax.errorbar(
-                x,
-                mean,
-                yerr=np.where(np.isfinite(half), half, 0.0),
-                color=color,
-                marker=marker,
-                markersize=5,
-                linewidth=1.2,
-                capsize=3,
-                label=f"C = {c:g} (hopnav)",
-                zorder=3,
-            )
-            for xi, yi, s in zip(x, mean, row, strict=True):
-                if np.isfinite(yi):
-                    ax.annotate(
-                        f"{s.successes}/{s.n}",
-                        (xi, yi),
-                        textcoords="offset points",
-                        xytext=(5, 4),
-                        fontsize=6,
-                        color=color,
-                    )
-            paper = [(s.eps, s.paper[paper_k]) for s in row if s.paper is not None]
-            if paper:
-                px, py = np.array(paper).T
-                ax.plot(
-                    px,
-                    py,
-                    linestyle="--",
-                    marker=marker,
-                    markerfacecolor="white",
-                    color=color,
-                    linewidth=1.0,
-                    markersize=6,
-                    label=f"C = {c:g} (paper)",
-                    zorder=2,
-                )
-                every += list(py)
-            every += list(mean[np.isfinite(mean)]) + list((mean + half)[np.isfinite(half)])
-        values = np.abs(np.asarray(every))
-        positive = values[values > 0]
-        if attr == "reward" and positive.size and positive.max() / max(positive.min(), 1.0) > 100:
-            ax.set_yscale("symlog", linthresh=10.0)
-            label += " (symlog axis)"
-        ax.set_xticks(epss)
-        ax.set_xticklabels([f"{e:g}" for e in epss])
-        ax.set_xlabel("eps (decay rate of P_RL,gr = C exp(-eps m))")
-        ax.set_xlim(min(epss) - 0.15 * width, max(epss) + 0.15 * width)
-        ax.set_ylabel(label)
-        ax.grid(True, color="0.88", linewidth=0.6)
-        ax.set_title(f"{attr}: mean with {level} % CI, paper dashed", fontsize=9)
+            shift = (i - 0.5 * (len(cs) - 1)) * spread
+            every += _draw_series(ax, row, i, c, attr, paper_k, shift)
+        _format_axis(ax, attr, label, every, epss, width, level)
     handles, labels = axes[0].get_legend_handles_labels()
     order = sorted(range(len(labels)), key=lambda i: ("paper" in labels[i], labels[i]))
     handles, labels = [handles[i] for i in order], [labels[i] for i in order]
@@ -158,3 +107,73 @@ def build_table_plot(cells: Sequence[CellSummary], *, title: str = "", dpi: int 
     )
     fig.subplots_adjust(left=0.07, right=0.98, top=0.86, bottom=0.22, wspace=0.22)
     return fig
+
+
+def _draw_series(
+    ax, row: Sequence[CellSummary], i: int, c: float, attr: str, paper_k: int, shift: float
+) -> list[float]:
+    """Series ``i`` (the cells ``row`` of one C, by eps) of ``attr`` on ``ax``: the measured
+    means with their intervals (shifted by ``shift`` along x), the goal counts beside them,
+    the paper's values dashed; returns the values the y axis must show."""
+    x = np.array([s.eps for s in row]) + shift
+    mean, half = _values(row, attr)
+    color, marker = SERIES_COLORS[i % len(SERIES_COLORS)], _MARKERS[i % len(_MARKERS)]
+    ax.errorbar(
+        x,
+        mean,
+        yerr=np.where(np.isfinite(half), half, 0.0),
+        color=color,
+        marker=marker,
+        markersize=5,
+        linewidth=1.2,
+        capsize=3,
+        label=f"C = {c:g} (hopnav)",
+        zorder=3,
+    )
+    for xi, yi, s in zip(x, mean, row, strict=True):
+        if np.isfinite(yi):
+            ax.annotate(
+                f"{s.successes}/{s.n}",
+                (xi, yi),
+                textcoords="offset points",
+                xytext=(5, 4),
+                fontsize=6,
+                color=color,
+            )
+    every: list[float] = []
+    paper = [(s.eps, s.paper[paper_k]) for s in row if s.paper is not None]
+    if paper:
+        px, py = np.array(paper).T
+        ax.plot(
+            px,
+            py,
+            linestyle="--",
+            marker=marker,
+            markerfacecolor="white",
+            color=color,
+            linewidth=1.0,
+            markersize=6,
+            label=f"C = {c:g} (paper)",
+            zorder=2,
+        )
+        every += list(py)
+    return every + list(mean[np.isfinite(mean)]) + list((mean + half)[np.isfinite(half)])
+
+
+def _format_axis(
+    ax, attr: str, label: str, every: list[float], epss: list[float], width: float, level: int
+) -> None:
+    """Ticks at ``epss``, labels, grid and title of one panel; the reward axis is
+    symmetric-logarithmic when ``every`` spans more than two decades."""
+    values = np.abs(np.asarray(every))
+    positive = values[values > 0]
+    if attr == "reward" and positive.size and positive.max() / max(positive.min(), 1.0) > 100:
+        ax.set_yscale("symlog", linthresh=10.0)
+        label += " (symlog axis)"
+    ax.set_xticks(epss)
+    ax.set_xticklabels([f"{e:g}" for e in epss])
+    ax.set_xlabel("eps (decay rate of P_RL,gr = C exp(-eps m))")
+    ax.set_xlim(min(epss) - 0.15 * width, max(epss) + 0.15 * width)
+    ax.set_ylabel(label)
+    ax.grid(True, color="0.88", linewidth=0.6)
+    ax.set_title(f"{attr}: mean with {level} % CI, paper dashed", fontsize=9)

@@ -25,10 +25,11 @@ from typing import Protocol
 
 import numpy as np
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.model import HopperModel
 
 
-class TerrainError(ValueError):
+class TerrainError(HopperSimError, ValueError):
     """Invalid terrain parameters or query points."""
 
 

@@ -25,6 +25,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.sweep import PAPER_TABLE_I
 
 Verdict = Literal["holds", "does not hold", "inconclusive", "insufficient data"]
@@ -63,7 +64,7 @@ def paper_points() -> list[CellMean]:
     return [CellMean(c, e, r, s) for (c, e), (r, s) in PAPER_TABLE_I.items()]
 
 
-class TrendDataError(ValueError):
+class TrendDataError(HopperSimError, ValueError):
     """The data cannot give a slope (too few points, a single x value, non-finite values)."""
 
 

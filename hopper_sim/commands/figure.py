@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _save(fig, outs: list[Path], metadata: dict[str, Any]) -> list[Path]:
     """Write ``fig`` to every path of ``outs`` (their folders created)."""
-    from hopper_sim.figures import save_figure
+    from hopper_sim.figure_files import save_figure
 
     for out in outs:
         out.parent.mkdir(parents=True, exist_ok=True)

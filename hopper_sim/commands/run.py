@@ -243,14 +243,9 @@ def _report(args, sc, ends, files: dict, prov: dict) -> None:
             print(f"{key}: {path}")
 
 
-def run(args: argparse.Namespace) -> int:
-    from planner.errors import PlannerError
-    from planner.scenario import load_scenario
-
-    try:
-        sc = load_scenario(args.scenario)
-    except PlannerError as err:
-        raise UsageError(str(err)) from None
+def _outputs(args: argparse.Namespace, sc) -> tuple[Path | None, Path | None]:
+    """The recording and figure paths of ``args`` (``None``: not written), with ``--q-table``
+    checked: refused for a known-reward scenario, its folder writable."""
     stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
     rrd = None if args.no_rrd else output_file(args.rrd or f"runs/{stem}.rrd", "--rrd", (".rrd",))
     png = None if args.no_png else figure_file(args.png or f"runs/{stem}.png", "--png")
@@ -261,6 +256,34 @@ def run(args: argparse.Namespace) -> int:
                 "is learnt to load or save (--q-table is for unknown-reward scenarios)"
             )
         output_file(args.q_table, "--q-table")
+    return rrd, png
+
+
+def _runner(args: argparse.Namespace, sc, ckpt_path: Path, learner):
+    """The navigation runner of scenario ``sc`` (already with ``--max-steps``) on the
+    controller of ``ckpt_path``, exploring as ``--explore-to``/``--tour`` say."""
+    from hopper_sim.environment import HopperGridEnv
+    from hopper_sim.runner import NavigationRunner, RunnerSettings
+
+    model, controller = _controller(ckpt_path)
+    settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
+    env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
+    try:
+        return NavigationRunner(sc, env=env, settings=settings, learner=learner)
+    except ValueError as err:  # e.g. a Q-table of another product size, a formula too hard
+        where = f"--q-table {args.q_table}" if learner is not None else f"scenario {sc.name}"
+        raise UsageError(f"{where}: {' '.join(str(err).split())}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.errors import PlannerError
+    from planner.scenario import load_scenario
+
+    try:
+        sc = load_scenario(args.scenario)
+    except PlannerError as err:
+        raise UsageError(str(err)) from None
+    rrd, png = _outputs(args, sc)
     from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
     from hopper_sim.provenance import provenance
 
@@ -270,23 +293,14 @@ def run(args: argparse.Namespace) -> int:
     if args.q_table and Path(args.q_table).exists():
         learner = _load_learner(args.q_table, prov)
 
-    from hopper_sim.environment import HopperGridEnv
     from hopper_sim.events import Observers
     from hopper_sim.figures import FigureWriter
     from hopper_sim.recording import RerunRecorder
-    from hopper_sim.runner import NavigationRunner, RunnerSettings
 
-    model, controller = _controller(ckpt_path)
     if args.max_steps is not None:
         sc = sc.with_runner(max_steps=args.max_steps)
     n_runs = sc.runner.runs if args.runs is None else args.runs
-    settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
-    env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
-    try:
-        runner = NavigationRunner(sc, env=env, settings=settings, learner=learner)
-    except ValueError as err:  # e.g. a Q-table of another product size, a formula too hard
-        where = f"--q-table {args.q_table}" if learner is not None else f"scenario {sc.name}"
-        raise UsageError(f"{where}: {' '.join(str(err).split())}") from None
+    runner = _runner(args, sc, ckpt_path, learner)
 
     prepare_kernels("hopnav run", quiet=args.quiet or args.json)
     for path in (rrd, png):
@@ -321,13 +335,16 @@ def run(args: argparse.Namespace) -> int:
         runner.learner.save(args.q_table, metadata={"provenance": prov})
     _report(args, sc, finished.ends, files, prov)
     if failure is not None:
-        k = (finished.current if finished.current is not None else len(finished.ends)) + 1
-        kept = [p for p in files.values() if p is not None]
-        where = f" in {', '.join(kept)}" if kept and finished.ends else ""
-        raise RunFailed(
-            f"run {k} of {n_runs} {failure}; kept the {len(finished.ends)} finished run(s){where}"
-        )
+        raise RunFailed(_failure_message(failure, finished, n_runs, files))
     return 0
+
+
+def _failure_message(failure: str, finished: _Finished, n_runs: int, files: dict) -> str:
+    """The one-line error of an interrupted or failed invocation: which run, what is kept."""
+    k = (finished.current if finished.current is not None else len(finished.ends)) + 1
+    kept = [p for p in files.values() if p is not None]
+    where = f" in {', '.join(kept)}" if kept and finished.ends else ""
+    return f"run {k} of {n_runs} {failure}; kept the {len(finished.ends)} finished run(s){where}"
 
 
 def _keep_finished(finished: _Finished, recorder, writer, files: dict) -> None:

@@ -130,31 +130,13 @@ def _refuse_overwrite(out: Path, force: bool) -> None:
         (out / name).unlink()
 
 
-def run(args: argparse.Namespace) -> int:
-    out = output_folder(args.out, "--out")
-    from tqdm import tqdm
-
+def _prepare(args: argparse.Namespace, out: Path):
+    """(scenario, spec, provenance, grid record, reused rows) of the sweep ``args`` asks for,
+    with ``--out`` checked for ``--resume``/``--force`` and the Ray backend importable."""
     from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
     from hopper_sim.provenance import ProvenanceError, provenance
-    from hopper_sim.sweep import (
-        PAPER_CS,
-        PAPER_EPSS,
-        SweepBackendError,
-        SweepError,
-        SweepRow,
-        SweepRunError,
-        SweepSpec,
-        run_sweep,
-    )
-    from hopper_sim.sweep_files import (
-        ROWS_FILE,
-        SweepFileError,
-        atomic_write_text,
-        format_table,
-        read_rows_csv,
-        rows_csv,
-        write_outputs,
-    )
+    from hopper_sim.sweep import PAPER_CS, PAPER_EPSS, SweepBackendError, SweepError, SweepSpec
+    from hopper_sim.sweep_files import SweepFileError, read_rows_csv
     from planner.errors import ScenarioError
     from planner.scenario import load_scenario
 
@@ -179,6 +161,17 @@ def run(args: argparse.Namespace) -> int:
             _import_ray()
     except (ScenarioError, SweepError, SweepFileError, ProvenanceError, SweepBackendError) as err:
         raise UsageError(str(err)) from None
+    return scenario, spec, prov, grid, previous
+
+
+def run(args: argparse.Namespace) -> int:
+    out = output_folder(args.out, "--out")
+    from tqdm import tqdm
+
+    from hopper_sim.sweep import SweepBackendError, SweepError, SweepRow, SweepRunError, run_sweep
+    from hopper_sim.sweep_files import ROWS_FILE, atomic_write_text, rows_csv, write_outputs
+
+    scenario, spec, prov, grid, previous = _prepare(args, out)
     if args.backend != "serial" or spec.n_runs > len(previous):
         prepare_kernels("hopnav sweep", quiet=args.json)  # once, before the workers start
     order = {(t.c, t.eps, t.run, t.seed): t.index for t in spec.tasks()}
@@ -219,11 +212,19 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.sweep_plot import PLOT_FILE, write_table_plot
 
     paths["plot"] = write_table_plot(result.cells, out / PLOT_FILE, metadata=prov)
+    _print_results(args, result, spec, paths)
+    return 0
+
+
+def _print_results(args: argparse.Namespace, result: Any, spec: Any, paths: dict) -> None:
+    """The sweep's table (or, with ``--json``, its JSON record) and the files written."""
+    from hopper_sim.sweep_files import format_table
+
     if args.json:
         record = result.to_json()
         record["files"] = {k: str(v) for k, v in paths.items()}
         print(json.dumps(record, indent=2, allow_nan=False))
-        return 0
+        return
     print(format_table(result))
     print(
         f"\n{spec.n_runs} runs in {result.seconds:.1f} s ({result.backend}, {result.workers} "
@@ -231,7 +232,6 @@ def run(args: argparse.Namespace) -> int:
     )
     for kind, path in paths.items():
         print(f"{kind}: {path}")
-    return 0
 
 
 def _previous_rows(

@@ -104,34 +104,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    output_file(args.out, "--out", (".pt",))
-    if args.save_data is not None:
-        output_file(args.save_data, "--save-data", (".npz",))
-    if args.data is not None:
-        input_file(args.data, "--data")
-
-    import torch
+def _dataset(args: argparse.Namespace, hop_fn, param_hash: str):
+    """The hops to train on: loaded from ``--data`` (refused unless simulated with these
+    hopper parameters) or simulated (and saved to ``--save-data`` if given)."""
     from tqdm import tqdm
 
-    from hopper_sim.controller.checkpoint import HopModelCheckpoint, save_checkpoint
     from hopper_sim.controller.dataset import (
         Sampling,
         generate_dataset,
         load_dataset,
         save_dataset,
     )
-    from hopper_sim.controller.hop_model import OUTPUT_NAMES
-    from hopper_sim.controller.simulator import simulator_hop_fn
-    from hopper_sim.controller.steady import steady_state
-    from hopper_sim.controller.training import TrainConfig, train_hop_model
-    from hopper_sim.model import HopperModel
-    from hopper_sim.provenance import provenance
 
-    torch.set_num_threads(args.torch_threads)
-    model = HopperModel.load()
-    param_hash = model.param_hash()
-    hop_fn = simulator_hop_fn(model, nominal_speed=args.nominal_speed, nthread=args.nthread)
     if args.data is not None:
         try:
             dataset = load_dataset(args.data)
@@ -143,33 +127,36 @@ def run(args: argparse.Namespace) -> int:
                 f"{dataset.metadata.get('param_hash')}, the model has {param_hash}"
             )
         print(f"loaded {len(dataset)} hops from {args.data}")
-    else:
-        t0 = time.perf_counter()
-        with tqdm(total=args.samples, desc="simulating hops", unit="hop") as bar:
-            dataset = generate_dataset(
-                hop_fn,
-                args.samples,
-                seed=args.seed,
-                sampling=Sampling(shell_speed=args.nominal_speed),
-                chunk=2000,
-                metadata={"param_hash": param_hash, "nominal_speed": args.nominal_speed},
-                progress=bar.update,
-            )
-        dt = time.perf_counter() - t0
-        print(
-            f"simulated {len(dataset)} hops in {dt:.1f} s ({len(dataset) / dt:.0f} hops/s), "
-            f"{dataset.ok.mean():.1%} successful"
+        return dataset
+    t0 = time.perf_counter()
+    with tqdm(total=args.samples, desc="simulating hops", unit="hop") as bar:
+        dataset = generate_dataset(
+            hop_fn,
+            args.samples,
+            seed=args.seed,
+            sampling=Sampling(shell_speed=args.nominal_speed),
+            chunk=2000,
+            metadata={"param_hash": param_hash, "nominal_speed": args.nominal_speed},
+            progress=bar.update,
         )
-        if args.save_data is not None:
-            args.save_data.parent.mkdir(parents=True, exist_ok=True)
-            print(f"saved dataset to {save_dataset(dataset, args.save_data)}")
-
-    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
+    dt = time.perf_counter() - t0
     print(
-        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
-        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
+        f"simulated {len(dataset)} hops in {dt:.1f} s ({len(dataset) / dt:.0f} hops/s), "
+        f"{dataset.ok.mean():.1%} successful"
     )
-    config = TrainConfig(hidden=args.hidden, epochs=args.epochs)
+    if args.save_data is not None:
+        args.save_data.parent.mkdir(parents=True, exist_ok=True)
+        print(f"saved dataset to {save_dataset(dataset, args.save_data)}")
+    return dataset
+
+
+def _train(args: argparse.Namespace, dataset, config):
+    """The trained hop model (with a progress bar), its held-out errors printed."""
+    from tqdm import tqdm
+
+    from hopper_sim.controller.hop_model import OUTPUT_NAMES
+    from hopper_sim.controller.training import train_hop_model
+
     t0 = time.perf_counter()
     with tqdm(total=config.epochs, desc="training", unit="epoch") as bar:
 
@@ -186,6 +173,13 @@ def run(args: argparse.Namespace) -> int:
     f = result.metrics["feasibility"]
     print(f"  feasibility accuracy {f['accuracy']:.4f}, failed hops called ok ", end="")
     print(f"{f['false_ok_rate']:.4f}")
+    return result
+
+
+def _require_better_than_chance(args: argparse.Namespace, dataset, result) -> None:
+    """Refuse (or, with ``--allow-weak``, warn about) a feasibility head whose held-out
+    accuracy is below that of always answering the more common class."""
+    f = result.metrics["feasibility"]
     held_out_ok = float(dataset.ok[result.test_index].mean())
     chance = max(held_out_ok, 1.0 - held_out_ok)
     if f["accuracy"] < chance:
@@ -200,6 +194,38 @@ def run(args: argparse.Namespace) -> int:
                 "--allow-weak)"
             )
         print(f"hopnav train-controller: warning: {message}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    output_file(args.out, "--out", (".pt",))
+    if args.save_data is not None:
+        output_file(args.save_data, "--save-data", (".npz",))
+    if args.data is not None:
+        input_file(args.data, "--data")
+
+    import torch
+
+    from hopper_sim.controller.checkpoint import HopModelCheckpoint, save_checkpoint
+    from hopper_sim.controller.simulator import simulator_hop_fn
+    from hopper_sim.controller.steady import steady_state
+    from hopper_sim.controller.training import TrainConfig
+    from hopper_sim.model import HopperModel
+    from hopper_sim.provenance import provenance
+
+    torch.set_num_threads(args.torch_threads)
+    model = HopperModel.load()
+    param_hash = model.param_hash()
+    hop_fn = simulator_hop_fn(model, nominal_speed=args.nominal_speed, nthread=args.nthread)
+    dataset = _dataset(args, hop_fn, param_hash)
+
+    steady = steady_state(hop_fn, args.hop_length, total_speed=args.nominal_speed)
+    print(
+        f"steady gait: {steady.hop_length} m hops at |v| = {args.nominal_speed} m/s: "
+        f"s = {steady.speed:.4f} m/s, v_z = {steady.vz:.4f} m/s, alpha = {steady.alpha:.4f} rad"
+    )
+    config = TrainConfig(hidden=args.hidden, epochs=args.epochs)
+    result = _train(args, dataset, config)
+    _require_better_than_chance(args, dataset, result)
 
     metadata = {
         "command": (

@@ -6,8 +6,10 @@ from :class:`ControllerError`, itself a ``ValueError``.
 
 from __future__ import annotations
 
+from hopper_sim.errors import HopperSimError
 
-class ControllerError(ValueError):
+
+class ControllerError(HopperSimError, ValueError):
     """Base class of every error raised by :mod:`hopper_sim.controller`."""
 
 

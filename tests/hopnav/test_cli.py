@@ -149,6 +149,7 @@ print("NEW", {n: after[n] - before[n] for n in after if after[n] != before[n]})
 """
 
 
+@pytest.mark.slow
 def test_first_synthesis_compiles_nothing_after_the_warm_up():
     proc = subprocess.run(
         [sys.executable, "-c", FIRST_SYNTHESIS],

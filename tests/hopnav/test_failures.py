@@ -271,6 +271,7 @@ def test_corrupt_q_table_is_refused(hopnav, tmp_path):
 # --------------------------------------------------------------------------- train-controller
 
 
+@pytest.mark.slow
 def test_model_worse_than_chance_writes_no_checkpoint(hopnav, tmp_path, monkeypatch):
     """As with `--samples 10` before the minimum: a feasibility head right on 0 % of the
     held-out hops (here the real training, its held-out accuracy then set to 0)."""

@@ -24,6 +24,7 @@ def run():
     return runner, collect_run_data(runner, seed=2)
 
 
+@pytest.mark.slow
 def test_small_loop_like_audit_holds(run):
     runner, data = run
     assert len(data.positions) > 0 and data.errors.shape == data.positions.shape

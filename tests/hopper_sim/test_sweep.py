@@ -254,6 +254,7 @@ def test_ray_missing_gives_a_clear_error(scenario, monkeypatch):
         run_sweep(scenario, SMALL, run=fake_run, backend="ray")
 
 
+@pytest.mark.slow
 def test_ray_backend_two_runs_equal_serial(scenario):
     pytest.importorskip("ray")
     spec = SweepSpec(cs=(0.5,), epss=(0.005,), runs=2, seed=11)

@@ -9,6 +9,7 @@ from hopper_sim.controller.errors import CheckpointModelMismatchError
 from hopper_sim.model import HopperModel
 
 
+@pytest.mark.slow
 def test_train_controller_small_run(tmp_path, capsys):
     out, data = tmp_path / "c.pt", tmp_path / "d.npz"
     args = ["train-controller", "--samples", "200", "--epochs", "2", "--hidden", "16"]
