@@ -205,6 +205,7 @@ def scenario_product_model(name: str):
 
     from hopper_sim.model import HopperModel
     from planner.gp.landing import LandingErrorGP
+    from planner.imdp.analysis import labelled_model
     from planner.imdp.grid import GridWorld
     from planner.imdp.product import ProductIMDP
     from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
@@ -219,7 +220,7 @@ def scenario_product_model(name: str):
     ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
     model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])
     reward = np.append(np.asarray(sc.reward_grid, float).ravel(), 0.0)
-    return ProductIMDP(model, translate(sc.formula), reward).labelled_model()
+    return labelled_model(ProductIMDP(model, translate(sc.formula), reward))
 
 
 def run_export(args: argparse.Namespace) -> int:
