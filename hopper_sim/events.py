@@ -31,6 +31,11 @@ if TYPE_CHECKING:
     from planner.verdict import MissionReport
 
 
+PHASES: tuple[str, ...] = tuple(m.value for m in Phase)
+SOURCES: tuple[str, ...] = tuple(m.value for m in Source)
+OUTCOMES: tuple[str, ...] = tuple(m.value for m in Outcome)
+"""The modes' strings in order (:mod:`planner.modes`), for tables and file formats."""
+
 _M = TypeVar("_M", bound=Enum)
 
 
@@ -42,7 +47,7 @@ def _mode(name: str, value: str, modes: type[_M]) -> _M:
     try:
         return modes(value)
     except ValueError:
-        allowed = tuple(str(m) for m in modes)
+        allowed = tuple(m.value for m in modes)
         raise EventError(f"{name} must be one of {allowed}, got {value!r}") from None
 
 

@@ -27,7 +27,8 @@ One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"
    plan's satisfying sub-model does it leave the plan (back to exploration with the latest
    synthesis, which may switch again); :attr:`~hopper_sim.events.RunEnd.left_plan_step`
    reports when.
-4. The automaton decides the outcome (:class:`planner.verdict.MissionMonitor`, one rule for
+4. The automaton decides the outcome (:func:`hopper_sim.episode.hop_outcome` on the product
+   state entered, :class:`planner.verdict.MissionMonitor` at the step cap; one rule for
    every class of formula): the run ends in success as soon as every hazard-free continuation
    satisfies the formula (for ``!Haz U Goal``: the goal; for ``F(a & F goal) & G !haz``: the
    goal after ``a``), in violation as soon as none does, on a hazard cell, off the map, or
@@ -42,19 +43,23 @@ learns the reward from visits and updates its Q-values online; it persists acros
 :meth:`NavigationRunner.run_many` (and can be saved and loaded), while the GP data is reset at
 every run, as in the paper.
 
-The runner never prints or plots: it calls an observer (:mod:`hopper_sim.events`).
+The loop (:meth:`NavigationRunner._run`) is a few lines, as dm_control's ``Environment.step``:
+decide, hop, land; the hooks ``_begin``, ``_land`` (with ``_learn`` and ``_replan``) and
+``_finish`` do the work on the run's :class:`~hopper_sim.episode.Episode`. The runner never
+prints or plots: it calls an observer (:mod:`hopper_sim.events`), with events built by their
+own constructors.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.episode import Episode, RunClock, hop_outcome
 from hopper_sim.error_prior import error_prior
 from hopper_sim.events import (
     HopEvent,
@@ -67,7 +72,7 @@ from hopper_sim.events import (
 from planner.gp.landing import FitSettings, LandingErrorGP
 from planner.imdp.analysis import accepting_states
 from planner.imdp.grid import ACTIONS
-from planner.imdp.product import ProductIMDP, check_product_size
+from planner.imdp.product import check_product_size
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import Resynthesis, ResynthesisSettings, replan_reward, resynthesise
 from planner.ltl.translate import translate
@@ -76,7 +81,7 @@ from planner.policy import Decision, SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
 from planner.scenario import Scenario
 from planner.torch_threads import torch_threads
-from planner.verdict import ACCEPTED, REJECTED, AutomatonVerdicts, MissionMonitor, describe
+from planner.verdict import AutomatonVerdicts, MissionMonitor, describe
 
 
 @dataclass(frozen=True)
@@ -251,7 +256,7 @@ class NavigationRunner:
             settings=self.synthesis_settings,
         )
 
-    def _install(self, ep: _Episode, res: Resynthesis, step: int) -> None:
+    def _install(self, ep: Episode, res: Resynthesis, step: int) -> None:
         """Hand a (re-)synthesis after ``step`` hops to the policy and the observer."""
         ep.res = res
         ep.clock.add_synthesis(res.timings)
@@ -287,9 +292,9 @@ class NavigationRunner:
             ep.outcome = self._land(ep, decision, obs, reward, terminated, info)
         return self._finish(ep)
 
-    def _begin(self, seed: int, run_index: int) -> _Episode:
+    def _begin(self, seed: int, run_index: int) -> Episode:
         """Reset the world, the data and the learner's collections; the initial synthesis."""
-        clock = _RunClock(self.clock)
+        clock = RunClock(self.clock)
         # the third word seeded the old GP's k-means; kept so that a seed's draws stay the same
         env_seed, policy_seed, _ = np.random.SeedSequence(seed).generate_state(3)
         rng = np.random.default_rng(policy_seed)
@@ -302,16 +307,16 @@ class NavigationRunner:
         product = res.product
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
-        ep = _Episode(run_index, rng, gp, clock, res, policy, pstate)
+        monitor = MissionMonitor(self.verdicts, self.scenario.runner.window)
+        ep = Episode(run_index, rng, gp, clock, res, policy, pstate, monitor)
         self._install(ep, res, 0)
-        ep.monitor = MissionMonitor(self.verdicts, self.scenario.runner.window)
-        ep.monitor.start(product.automaton_state_of(pstate))
+        monitor.start(product.automaton_state_of(pstate))
         ep.outcome = hop_outcome(product, self.verdicts, pstate, start=True)
         return ep
 
     def _land(
         self,
-        ep: _Episode,
+        ep: Episode,
         decision: Decision,
         obs: dict,
         reward: float,
@@ -364,7 +369,7 @@ class NavigationRunner:
         return outcome
 
     def _learn(
-        self, ep: _Episode, action: int, landed: int, nxt: int, reward: float, first: bool
+        self, ep: Episode, action: int, landed: int, nxt: int, reward: float, first: bool
     ) -> None:
         """An unknown reward's learner: the landing's collection and its Q-update."""
         if self.learner is None:
@@ -381,7 +386,7 @@ class NavigationRunner:
             learn_reward=first or not self.pays_once,
         )
 
-    def _replan(self, ep: _Episode, paid_cell: bool) -> None:
+    def _replan(self, ep: Episode, paid_cell: bool) -> None:
         """After a full batch the re-synthesis; else, after a first landing in a cell with a
         nonzero reward where cells pay once, the reward plan."""
         if ep.steps % self.scenario.runner.batch_size == 0:
@@ -393,7 +398,7 @@ class NavigationRunner:
                 ep.res = replace(ep.res, q=q_sol, rl=rl, tour=tour)
                 ep.policy.replan_reward(rl, tour)
 
-    def _finish(self, ep: _Episode) -> RunEnd:
+    def _finish(self, ep: Episode) -> RunEnd:
         """Judge the run (at the step cap: its last window) and report its end."""
         in_accepting = bool(accepting_states(ep.res.product)[ep.pstate])
         mission = ep.monitor.report(in_accepting)
@@ -431,79 +436,3 @@ def run_single(scenario: Scenario, seed: int, run_index: int = 0) -> RunEnd:
     """One run of ``scenario`` with default settings and no observer (picklable, for worker
     processes)."""
     return NavigationRunner(scenario).run(seed, run_index=run_index)
-
-
-def hop_outcome(
-    product: ProductIMDP,
-    verdicts: AutomatonVerdicts,
-    state: int,
-    *,
-    terminated: bool = False,
-    out: int = -1,
-    start: bool = False,
-) -> tuple[Outcome, str] | None:
-    """The outcome rule: how a run ends on entering product state ``state`` (``None``: it
-    goes on). ``terminated``: the environment ended the episode there (a hazard cell, or
-    ``out``, the model state off the map); else the automaton decides (:mod:`planner.verdict`):
-    violation as soon as no hazard-free continuation satisfies the formula, success as soon
-    as every one does. ``start``: the run's first state (the reasons say so)."""
-    if terminated:
-        off_map = product.base_state_of(state) == out
-        return Outcome.VIOLATION, "left the map" if off_map else "hazard"
-    verdict = verdicts.verdict(product.automaton_state_of(state))
-    if verdict == REJECTED:
-        return Outcome.VIOLATION, "rejected at the start" if start else "specification violated"
-    if verdict == ACCEPTED:
-        return Outcome.SUCCESS, "accepted at the start" if start else "specification satisfied"
-    return None
-
-
-class _RunClock:
-    """A run's wall-clock seconds: since its start, per stage (``gp_fit``, ``abstraction``,
-    ``synthesis`` summed over its syntheses; ``hops``; ``replan``) and the longest single
-    synthesis (``batch_max``)."""
-
-    def __init__(self, clock: Callable[[], float]) -> None:
-        self.clock, self.start = clock, clock()
-        self.seconds = dict.fromkeys(("gp_fit", "abstraction", "synthesis", "hops", "replan"), 0.0)
-        self.batch_max = 0.0
-
-    @contextmanager
-    def timed(self, stage: str) -> Iterator[None]:
-        t0 = self.clock()
-        yield
-        self.seconds[stage] += self.clock() - t0
-
-    def add_synthesis(self, timings: dict[str, float]) -> None:
-        for k, v in timings.items():
-            self.seconds[k] = self.seconds.get(k, 0.0) + v
-        self.batch_max = max(self.batch_max, sum(timings.values()))
-
-    def elapsed(self) -> float:
-        return self.clock() - self.start
-
-    def report(self) -> dict[str, float]:
-        return {**self.seconds, "batch_max": self.batch_max}
-
-
-@dataclass
-class _Episode:
-    """One run's state between the hooks of :class:`NavigationRunner`."""
-
-    run_index: int
-    rng: np.random.Generator
-    gp: LandingErrorGP
-    clock: _RunClock
-    res: Resynthesis
-    policy: SwitchingPolicy
-    pstate: int
-    monitor: MissionMonitor | None = None
-    outcome: tuple[Outcome, str] | None = None
-    positions: list[np.ndarray] = field(default_factory=list)
-    errors: list[np.ndarray] = field(default_factory=list)
-    actions: list[int] = field(default_factory=list)
-    records: list[ResynthesisRecord] = field(default_factory=list)
-    steps: int = 0
-    backups: int = 0
-    collections: int = 0
-    total: float = 0.0

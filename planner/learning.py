@@ -51,7 +51,7 @@ from planner.qlearning import QSolution, RobustQLearner
 from planner.synthesis import Synthesis, q_values, synthesise
 from planner.tour import TOUR_MODES, ComponentTour
 
-CANDIDATES: tuple[str, ...] = tuple(Candidates)
+CANDIDATES: tuple[str, ...] = tuple(m.value for m in Candidates)
 """The exploration targets of :class:`ResynthesisSettings` (``candidates``)."""
 
 
@@ -184,6 +184,22 @@ def _reward_to_collect(
     return w
 
 
+def _abstraction(
+    gp: LandingErrorGP, grid: GridWorld, s: ResynthesisSettings, initial_cell: int
+) -> tuple[CellErrorBounds, TransitionIntervals, IMDP]:
+    """Per-(cell, action) error bounds of ``gp``, their transition intervals, the grid IMDP."""
+    bounds = cell_error_bounds(
+        gp,
+        grid,
+        samples_per_axis=s.samples_per_axis,
+        delta=s.delta,
+        horizon=s.horizon,
+        beta=s.beta,
+    )
+    intervals = transition_intervals(bounds, grid, s.noise)
+    return bounds, intervals, grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
+
+
 def resynthesise(
     gp: LandingErrorGP,
     grid: GridWorld,
@@ -230,18 +246,8 @@ def resynthesise(
     t0 = clock()
     fit = gp.fit(positions, errors, actions)
     t1 = clock()
-    bounds = cell_error_bounds(
-        gp,
-        grid,
-        samples_per_axis=s.samples_per_axis,
-        delta=s.delta,
-        horizon=s.horizon,
-        beta=s.beta,
-    )
-    intervals = transition_intervals(bounds, grid, s.noise)
-    model = grid.imdp_from_intervals(*intervals.coo(), initial=[initial_cell])
-    w = _reward_to_collect(grid, reward, learner, collected)
-    product = ProductIMDP(model, automaton, w)
+    bounds, intervals, model = _abstraction(gp, grid, s, initial_cell)
+    product = ProductIMDP(model, automaton, _reward_to_collect(grid, reward, learner, collected))
     t2 = clock()
     syn = synthesise(
         product,

@@ -59,6 +59,7 @@ from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
+from planner.modes import Adversary, Objective
 
 StateSet = np.ndarray | str | Sequence[str] | Sequence[int]
 
@@ -89,20 +90,21 @@ class Specification:
 
     Args:
         property: :class:`ReachAvoid` or :class:`DiscountedReward`.
-        satisfaction: ``"pessimistic"`` (adversary opposes) or ``"optimistic"``.
-        strategy: ``"maximize"`` or ``"minimize"``.
+        satisfaction: the adversary, :class:`~planner.modes.Adversary`: ``"pessimistic"``
+            (it opposes) or ``"optimistic"``.
+        strategy: :class:`~planner.modes.Objective`: ``"maximize"`` or ``"minimize"``.
     """
 
     property: ReachAvoid | DiscountedReward
-    satisfaction: str = "pessimistic"
-    strategy: str = "maximize"
+    satisfaction: Adversary = Adversary.PESSIMISTIC
+    strategy: Objective = Objective.MAXIMIZE
 
     def __post_init__(self) -> None:
-        if self.satisfaction not in ("pessimistic", "optimistic"):
+        if self.satisfaction not in tuple(Adversary):
             raise SpecificationError(
                 f"satisfaction must be 'pessimistic' or 'optimistic', got {self.satisfaction!r}"
             )
-        if self.strategy not in ("maximize", "minimize"):
+        if self.strategy not in tuple(Objective):
             raise SpecificationError(
                 f"strategy must be 'maximize' or 'minimize', got {self.strategy!r}"
             )
@@ -300,8 +302,8 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     alg = ValueIteration() if algorithm is None else algorithm
     m = problem.model
     spec = problem.specification
-    maximize = spec.strategy == "maximize"
-    pessimistic = spec.satisfaction == "pessimistic"
+    maximize = spec.strategy == Objective.MAXIMIZE
+    pessimistic = spec.satisfaction == Adversary.PESSIMISTIC
     adversary_minimizes = maximize == pessimistic
     rows = problem.row_mask()
     n = m.n_states
