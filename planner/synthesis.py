@@ -17,7 +17,8 @@ Given the MT-PIMDP ``P+`` of the current abstraction (:class:`~planner.imdp.prod
    worst-case probability of reaching the chosen component within the nonviolating
    sub-model, heading along the shortest possible paths (:func:`frontier_strategy`) where that
    probability is 0, and inside it follows a :class:`~planner.tour.ComponentTour`; the
-   fallback plan for states without a nonviolating action (:func:`fallback_strategy`);
+   fallback plan for states without a nonviolating action (every enabled action allowed,
+   the LTL action the safest way back: :func:`fallback_strategy`);
 5. the *satisfying* sub-model for ``P_sat`` (Section V-D) and its *goal-reaching strategy*;
 6. the robust *Q-values* of the reward on the nonviolating sub-model, with nothing planned
    after the run's end (:func:`reward_actions`, :func:`q_values`).
@@ -53,6 +54,136 @@ from planner.tour import ComponentTour
 
 if TYPE_CHECKING:
     from planner.learning import ResynthesisSettings
+
+
+@dataclass(frozen=True)
+class Synthesis:
+    """What :func:`synthesise` produced on ``product``; ``synthesis_detail``: seconds per
+    step (``satisfaction``, ``nonviolating``, ``mec_choice`` when there are candidates,
+    ``steering``, ``fallback``, ``goal_strategy``, ``q_values``)."""
+
+    product: ProductIMDP
+    satisfaction: Solution
+    nonviolating: SubModel
+    satisfying: SubModel
+    mec: MecChoice | None
+    tour: ComponentTour | None
+    exploration: PhasePlan
+    goal: PhasePlan
+    fallback: PhasePlan
+    q_allowed: np.ndarray
+    q: QSolution
+    rl: RLActor
+    synthesis_detail: dict[str, float]
+
+
+def synthesise(
+    product: ProductIMDP,
+    settings: ResynthesisSettings,
+    *,
+    start: int,
+    uncertainty: np.ndarray,
+    aim: np.ndarray | None = None,
+    learner: RobustQLearner | None = None,
+    previous_q: np.ndarray | None = None,
+    clock: Callable[[], float] = time.perf_counter,
+) -> Synthesis:
+    """The steps of the module docstring from product state ``start``.
+
+    Args:
+        product: the MT-PIMDP, with the reward still to be collected as ``W``.
+        settings: ``p_sat``, ``candidates``, ``tour``, ``discount``, ``q_tolerance``.
+        start: the current product state (the MEC choice starts there).
+        uncertainty: ``(n_states,)`` how little is known per product state (the tour's
+            coverage order).
+        aim: ``(n_rows,)`` the product state each row aims at (the tour's steps).
+        learner: an unknown reward's learner (its sweep gives the Q-values).
+        previous_q: a Q-table of the same product states to warm-start the Q-iteration.
+        clock: time source for ``synthesis_detail``.
+    """
+    laps = _Laps(clock)
+    sat = analysis.satisfaction(product)
+    laps("satisfaction")
+    failure = analysis.failure_states(product)
+    nonviolating = analysis.nonviolating(product, failure)
+    laps("nonviolating")
+    mec = exploration_target(product, nonviolating, settings.candidates, start)
+    tour = None
+    if mec is not None:
+        laps("mec_choice")
+        tour = ComponentTour(
+            product.model,
+            mec.component,
+            nonviolating.actions,
+            product.base_state,
+            product.reward,
+            uncertainty,
+            settings.tour,
+            aim=aim,
+        )
+    steer = exploration_strategy(product, mec, nonviolating)
+    laps("steering")
+    fallback = fallback_strategy(product, sat, nonviolating, failure)
+    laps("fallback")
+    satisfying = analysis.satisfying(product, settings.p_sat, sat)
+    goal = analysis.goal_strategy(product, allowed=satisfying.actions)
+    laps("goal_strategy")
+    q_allowed = reward_actions(product, nonviolating)
+    q, rl = q_values(product.model, product.reward, q_allowed, settings, learner, previous_q)
+    laps("q_values")
+    return Synthesis(
+        product=product,
+        satisfaction=sat,
+        nonviolating=nonviolating,
+        satisfying=satisfying,
+        mec=mec,
+        tour=tour,
+        exploration=PhasePlan.masked(nonviolating.actions, steer),
+        goal=PhasePlan.masked(satisfying.actions, goal),
+        fallback=PhasePlan.masked(product.model.enabled.copy(), fallback),
+        q_allowed=q_allowed,
+        q=q,
+        rl=rl,
+        synthesis_detail=laps.seconds,
+    )
+
+
+def exploration_target(
+    product: ProductIMDP, nonviolating: SubModel, candidates: Candidates, start: int
+) -> MecChoice | None:
+    """The MEC choice from product state ``start`` (see the module docstring; ``None``:
+    no candidate). ``index`` is the component's index among the candidates found."""
+    mecs = []
+    if candidates == Candidates.ACCEPTING:
+        mecs = analysis.accepting_end_components(product)
+    if not mecs:
+        mecs = analysis.end_components(product, nonviolating.actions)
+    if not mecs:
+        return None
+    # choose_mec takes the first of equally good candidates: order them so that a tie goes
+    # to the component holding the current state, then to the larger one
+    order = sorted(range(len(mecs)), key=lambda k: (start not in mecs[k].states, -len(mecs[k])))
+    ordered = [mecs[k] for k in order]
+    mec = analysis.choose_mec(product, ordered, state=start, allowed=nonviolating.actions)
+    return replace(mec, index=order[mec.index])
+
+
+def exploration_strategy(
+    product: ProductIMDP, mec: MecChoice | None, nonviolating: SubModel
+) -> np.ndarray:
+    """The exploration's LTL action: towards ``mec`` within the nonviolating sub-model
+    (:func:`analysis.steer_strategy`; where no action reaches it with positive worst-case
+    probability, :func:`frontier_strategy`), or, without a component, the worst-case
+    satisfaction strategy within the nonviolating sub-model."""
+    if mec is None:
+        return analysis.goal_strategy(product, allowed=nonviolating.actions)
+    pm = product.model
+    steer = analysis.steer_strategy(product, mec.component, allowed=nonviolating.actions)
+    inside = mec.component.state_mask(pm.n_states)
+    open_ = (steer < 0) & ~inside
+    if open_.any():
+        steer = np.where(open_, frontier_strategy(pm, inside, nonviolating.actions), steer)
+    return steer
 
 
 def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> np.ndarray:
@@ -184,44 +315,6 @@ def q_values(
     return q, GreedyQ(np.nan_to_num(q.q, nan=-np.inf))
 
 
-def exploration_target(
-    product: ProductIMDP, nonviolating: SubModel, candidates: Candidates, start: int
-) -> MecChoice | None:
-    """The MEC choice from product state ``start`` (see the module docstring; ``None``:
-    no candidate). ``index`` is the component's index among the candidates found."""
-    mecs = []
-    if candidates == Candidates.ACCEPTING:
-        mecs = analysis.accepting_end_components(product)
-    if not mecs:
-        mecs = analysis.end_components(product, nonviolating.actions)
-    if not mecs:
-        return None
-    # choose_mec takes the first of equally good candidates: order them so that a tie goes
-    # to the component holding the current state, then to the larger one
-    order = sorted(range(len(mecs)), key=lambda k: (start not in mecs[k].states, -len(mecs[k])))
-    ordered = [mecs[k] for k in order]
-    mec = analysis.choose_mec(product, ordered, state=start, allowed=nonviolating.actions)
-    return replace(mec, index=order[mec.index])
-
-
-def exploration_strategy(
-    product: ProductIMDP, mec: MecChoice | None, nonviolating: SubModel
-) -> np.ndarray:
-    """The exploration's LTL action: towards ``mec`` within the nonviolating sub-model
-    (:func:`analysis.steer_strategy`; where no action reaches it with positive worst-case
-    probability, :func:`frontier_strategy`), or, without a component, the worst-case
-    satisfaction strategy within the nonviolating sub-model."""
-    if mec is None:
-        return analysis.goal_strategy(product, allowed=nonviolating.actions)
-    pm = product.model
-    steer = analysis.steer_strategy(product, mec.component, allowed=nonviolating.actions)
-    inside = mec.component.state_mask(pm.n_states)
-    open_ = (steer < 0) & ~inside
-    if open_.any():
-        steer = np.where(open_, frontier_strategy(pm, inside, nonviolating.actions), steer)
-    return steer
-
-
 class _Laps:
     """Seconds per named step, measured between successive calls."""
 
@@ -232,95 +325,3 @@ class _Laps:
         now = self.clock()
         self.seconds[name] = now - self.last
         self.last = now
-
-
-@dataclass(frozen=True)
-class Synthesis:
-    """What :func:`synthesise` produced on ``product``; ``synthesis_detail``: seconds per
-    step (``satisfaction``, ``nonviolating``, ``mec_choice`` when there are candidates,
-    ``steering``, ``fallback``, ``goal_strategy``, ``q_values``)."""
-
-    product: ProductIMDP
-    satisfaction: Solution
-    nonviolating: SubModel
-    satisfying: SubModel
-    mec: MecChoice | None
-    tour: ComponentTour | None
-    exploration: PhasePlan
-    goal: PhasePlan
-    fallback: PhasePlan
-    q_allowed: np.ndarray
-    q: QSolution
-    rl: RLActor
-    synthesis_detail: dict[str, float]
-
-
-def synthesise(
-    product: ProductIMDP,
-    settings: ResynthesisSettings,
-    *,
-    start: int,
-    uncertainty: np.ndarray,
-    aim: np.ndarray | None = None,
-    learner: RobustQLearner | None = None,
-    previous_q: np.ndarray | None = None,
-    clock: Callable[[], float] = time.perf_counter,
-) -> Synthesis:
-    """The steps of the module docstring from product state ``start``.
-
-    Args:
-        product: the MT-PIMDP, with the reward still to be collected as ``W``.
-        settings: ``p_sat``, ``candidates``, ``tour``, ``discount``, ``q_tolerance``.
-        start: the current product state (the MEC choice starts there).
-        uncertainty: ``(n_states,)`` how little is known per product state (the tour's
-            coverage order).
-        aim: ``(n_rows,)`` the product state each row aims at (the tour's steps).
-        learner: an unknown reward's learner (its sweep gives the Q-values).
-        previous_q: a Q-table of the same product states to warm-start the Q-iteration.
-        clock: time source for ``synthesis_detail``.
-    """
-    laps = _Laps(clock)
-    sat = analysis.satisfaction(product)
-    laps("satisfaction")
-    failure = analysis.failure_states(product)
-    nonviolating = analysis.nonviolating(product, failure)
-    laps("nonviolating")
-    mec = exploration_target(product, nonviolating, settings.candidates, start)
-    tour = None
-    if mec is not None:
-        laps("mec_choice")
-        tour = ComponentTour(
-            product.model,
-            mec.component,
-            nonviolating.actions,
-            product.base_state,
-            product.reward,
-            uncertainty,
-            settings.tour,
-            aim=aim,
-        )
-    steer = exploration_strategy(product, mec, nonviolating)
-    laps("steering")
-    fallback = fallback_strategy(product, sat, nonviolating, failure)
-    laps("fallback")
-    satisfying = analysis.satisfying(product, settings.p_sat, sat)
-    goal = analysis.goal_strategy(product, allowed=satisfying.actions)
-    laps("goal_strategy")
-    q_allowed = reward_actions(product, nonviolating)
-    q, rl = q_values(product.model, product.reward, q_allowed, settings, learner, previous_q)
-    laps("q_values")
-    return Synthesis(
-        product=product,
-        satisfaction=sat,
-        nonviolating=nonviolating,
-        satisfying=satisfying,
-        mec=mec,
-        tour=tour,
-        exploration=PhasePlan.masked(nonviolating.actions, steer),
-        goal=PhasePlan.masked(satisfying.actions, goal),
-        fallback=PhasePlan.masked(product.model.enabled.copy(), fallback),
-        q_allowed=q_allowed,
-        q=q,
-        rl=rl,
-        synthesis_detail=laps.seconds,
-    )

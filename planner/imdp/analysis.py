@@ -250,10 +250,11 @@ def steer_strategy(
 def inside_strategy(
     product: ProductIMDP, component: EndComponent, rows: np.ndarray | None = None
 ) -> np.ndarray:
-    """Per state of ``component`` (in its order), an action of the component (among
-    ``rows`` where it has any) that reaches its ``G`` states (of its pair; all its states
-    for a pair of -1 or no ``G`` state in it) with probability 1 against every adversary;
-    where none is needed, its first row's action (-1: none)."""
+    """The component's own actions, per state of ``component`` (in its order): outside its
+    target (the states of its pair's ``G``; all its states for ``pair = -1`` or no such
+    state) the action of a row that reaches the target with probability 1 against every
+    adversary within the component, elsewhere its first row of the component (-1: none).
+    ``rows`` restricts the component's rows where it leaves any."""
     m = product.model
     ec_rows = component.row_mask(m.n_rows)
     if rows is not None and (ec_rows & rows).any():
