@@ -43,6 +43,27 @@ def test_product_structure_and_initial_state():
     assert p.model.lower[sl].tolist() == [0.0, 0.8, 0.0]
 
 
+def test_the_product_answers_the_automaton_questions_of_a_product_state():
+    # corridor: cell 0 Haz, cell 4 Goal; automaton 0 waiting, 1 accepted, 2 rejected
+    g, m = corridor()
+    p = ProductIMDP(m, until_automaton())
+    s = p.state_index(3, 0)
+    assert (p.base_state_of(s), p.automaton_state_of(s)) == (3, 0)
+    assert p.letter_of(p.state_index(4, 1)) == 1 and p.letter_of(p.state_index(0, 2)) == 2
+    assert p.letter_of(s) == 0
+    # the sinks (accepted, rejected) are absorbing, the waiting state is not
+    assert p.absorbing.tolist() == [q != 0 for q in p.automaton_state]
+    nxt = np.array([4, 0, 2, g.out])
+    stepped = p.steps(np.full(4, s), nxt)
+    assert stepped.tolist() == [p.step(s, int(t)) for t in nxt]
+    assert stepped.tolist() == [
+        p.state_index(4, 1),
+        p.state_index(0, 2),
+        p.state_index(2, 0),
+        p.state_index(g.out, 2),
+    ]
+
+
 def test_failure_nonviolating_and_satisfaction():
     g, m = corridor()
     p = ProductIMDP(m, until_automaton())
