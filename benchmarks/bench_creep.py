@@ -28,6 +28,7 @@ import learning_loop
 
 from planner.gp import LandingErrorGP
 from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
+from planner.imdp.analysis import accepting_states
 
 learning_loop_resynthesise = learning_loop.resynthesise
 
@@ -49,7 +50,7 @@ def main() -> int:
     learning_loop.run_once(args.seed, loop_args, LandingErrorGP(learning_loop.prior()))
     r = seen[1]
     product = r.product
-    spec = Specification(ReachAvoid(product.accepting_states()))
+    spec = Specification(ReachAvoid(accepting_states(product)))
     for name, allowed in (("all actions", None), ("satisfying", r.satisfying.actions)):
         problem = Problem(product.model, spec, allowed)
         t0 = time.perf_counter()

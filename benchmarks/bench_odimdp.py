@@ -35,6 +35,7 @@ import numpy as np
 from hopper_sim.events import Observer
 from hopper_sim.runner import NavigationRunner
 from planner.gp.landing import LandingErrorGP
+from planner.imdp.analysis import satisfaction
 from planner.imdp.decoupled import DecoupledProduct, grid_decoupled_model
 from planner.imdp.grid import ACTIONS
 from planner.imdp.product import ProductIMDP
@@ -98,7 +99,7 @@ def main() -> None:
         ti = transition_intervals(bounds, grid, settings.noise)
         model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])
         pint = ProductIMDP(model, automaton)
-        p_sol = pint.satisfaction()
+        p_sol = satisfaction(pint)
         t1 = time.perf_counter()
         dm = grid_decoupled_model(
             grid,

@@ -20,6 +20,7 @@ from planner import (
     TruncatedGaussianNoise,
     cell_error_bounds,
     load_scenario,
+    satisfaction,
     transition_intervals,
     translate,
 )
@@ -39,7 +40,7 @@ def main() -> None:
 
     prior_settings = FitSettings(field_std=0.06, offset_std=0.25, bias_std=0.05, noise=noise)
     prior, wide = product_of(sc, grid, LandingErrorGP(prior_settings), noise)
-    p0 = prior.satisfaction().values[prior.initial]
+    p0 = satisfaction(prior).values[prior.initial]
     w0 = float(np.mean(wide.upper - wide.lower))
     print(f"{sc.name}: {sc.formula}, {grid.n_states} grid states, {prior.model.n_states} product")
     print(f"GP prior only: mean interval width {w0:.3f}, P_worst(start) {p0:.3f}")
@@ -52,7 +53,7 @@ def main() -> None:
     gp = LandingErrorGP(prior_settings)
     gp.fit(x, error + rng.normal(0.0, 0.1, size=error.shape), actions)
     learnt, narrow = product_of(sc, grid, gp, noise)
-    p1 = learnt.satisfaction().values[learnt.initial]
+    p1 = satisfaction(learnt).values[learnt.initial]
     w1 = float(np.mean(narrow.upper - narrow.lower))
     print(f"after 400 landings: mean interval width {w1:.3f}, P_worst(start) {p1:.3f}")
     assert w1 < w0 and p1 >= p0

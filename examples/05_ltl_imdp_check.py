@@ -22,6 +22,7 @@ from planner import (
     ReachAvoid,
     Specification,
     ValueIteration,
+    labelled_model,
     read_model,
     solve,
     translate,
@@ -58,7 +59,7 @@ def main() -> None:
         np.array(s), np.array(a), np.array(t), np.array(lo), np.array(up), initial=[0]
     )
     product = ProductIMDP(model, aut)
-    labelled = product.labelled_model()  # labels "accept" (accepting end components), "fail"
+    labelled = labelled_model(product)  # labels "accept" (accepting end components), "fail"
     values = {}
     for mode in ("pessimistic", "optimistic"):
         spec = Specification(ReachAvoid("accept", "fail"), mode)

@@ -14,33 +14,42 @@ and finally ``on_run_end``.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from dataclasses import dataclass, field, fields
+from enum import Enum
+from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from hopper_sim.errors import HopperSimError
+from planner.modes import Outcome, Phase, Source
 
 if TYPE_CHECKING:
+    from hopper_sim.environment import StepInfo
+    from planner.gp.landing import LandingErrorGP
+    from planner.learning import Resynthesis
+    from planner.policy import Decision
     from planner.scenario import Scenario
     from planner.verdict import MissionReport
 
-Phase = Literal["exploration", "goal_reaching", "fallback"]
-Source = Literal["LTL", "RL"]
-Outcome = Literal["success", "violation", "timeout", "satisfying"]
 
-PHASES: tuple[str, ...] = ("exploration", "goal_reaching", "fallback")
-SOURCES: tuple[str, ...] = ("LTL", "RL")
-OUTCOMES: tuple[str, ...] = ("success", "violation", "timeout", "satisfying")
+PHASES: tuple[str, ...] = tuple(m.value for m in Phase)
+SOURCES: tuple[str, ...] = tuple(m.value for m in Source)
+OUTCOMES: tuple[str, ...] = tuple(m.value for m in Outcome)
+"""The modes' strings in order (:mod:`planner.modes`), for tables and file formats."""
+
+_M = TypeVar("_M", bound=Enum)
 
 
 class EventError(HopperSimError, ValueError):
     """An event was built with a bad field (unknown phase, wrong array shape...)."""
 
 
-def _check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise EventError(f"{name} must be one of {allowed}, got {value!r}")
+def _mode(name: str, value: str, modes: type[_M]) -> _M:
+    try:
+        return modes(value)
+    except ValueError:
+        allowed = tuple(m.value for m in modes)
+        raise EventError(f"{name} must be one of {allowed}, got {value!r}") from None
 
 
 def _as_array(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:
@@ -122,8 +131,8 @@ class HopEvent:
     com_time: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        _check_choice("phase", self.phase, PHASES)
-        _check_choice("source", self.source, SOURCES)
+        object.__setattr__(self, "phase", _mode("phase", self.phase, Phase))
+        object.__setattr__(self, "source", _mode("source", self.source, Source))
         for name in ("start_pos", "target", "landing"):
             object.__setattr__(self, name, _as_array(name, getattr(self, name), (2,)))
         object.__setattr__(self, "foot", _as_array("foot", self.foot, (3,)))
@@ -132,6 +141,50 @@ class HopEvent:
         if self.com_time is not None:
             times = _as_array("com_time", self.com_time, (path.shape[0],))
             object.__setattr__(self, "com_time", times)
+
+    @classmethod
+    def of_hop(
+        cls,
+        run_index: int,
+        step: int,
+        decision: Decision,
+        info: StepInfo,
+        landing: np.ndarray,
+        cell: int,
+        *,
+        product_state: int,
+        p_worst: float,
+        reward: float,
+        total_reward: float,
+    ) -> HopEvent:
+        """The event of hop ``step``: the policy's ``decision``, the environment's step
+        ``info`` and the landing (CoM ``(x, y)`` and cell) in product state
+        ``product_state``."""
+        from planner.imdp.grid import ACTIONS
+
+        hop, chosen = info.hop, info.decision
+        has_path = len(hop.com_path) > 0
+        return cls(
+            run_index=run_index,
+            step=step,
+            phase=decision.phase,
+            source=decision.source,
+            backup=chosen.backup_used,
+            requested_action=ACTIONS[chosen.requested],
+            executed_action=ACTIONS[chosen.executed],
+            start_pos=info.start_pos,
+            target=info.target,
+            landing=landing,
+            com_path=hop.com_path if has_path else np.zeros((0, 3)),
+            foot=hop.foot,
+            touchdown_time=hop.touchdown_time,
+            cell=cell,
+            product_state=product_state,
+            p_worst=p_worst,
+            reward=reward,
+            total_reward=total_reward,
+            com_time=hop.com_path_time if has_path else None,
+        )
 
 
 @dataclass(frozen=True)
@@ -161,6 +214,28 @@ class ResynthesisRecord:
     mec_states: int = 0
     mec_probability: float | None = None
     mec_average_reward: float | None = None
+
+    @classmethod
+    def of_synthesis(cls, step: int, res: Resynthesis, current: int) -> ResynthesisRecord:
+        """The record of re-synthesis ``res``, run after ``step`` hops in product state
+        ``current``."""
+        fit, mec = res.fit, res.mec
+        values = res.satisfaction.values
+        gp = {}
+        for f in fields(fit):
+            value = np.asarray(getattr(fit, f.name))
+            if f.name != "num_data" and value.dtype.kind in "iuf" and np.isfinite(value).all():
+                gp[f.name] = tuple(float(v) for v in value.ravel())
+        return cls(
+            step=step,
+            p_worst_current=float(np.clip(values[current], 0.0, 1.0)),
+            p_worst_initial=float(np.clip(values[res.product.initial], 0.0, 1.0)),
+            num_data=int(fit.num_data),
+            gp=gp,
+            mec_states=0 if mec is None else len(mec.component),
+            mec_probability=None if mec is None else float(mec.probability),
+            mec_average_reward=None if mec is None else float(mec.average_reward),
+        )
 
 
 @dataclass(frozen=True)
@@ -197,6 +272,35 @@ class SynthesisEvent:
         for name in ("gp_mean", "gp_std"):
             value = _as_array(name, getattr(self, name), (gx.size, gy.size, 2))
             object.__setattr__(self, name, value)
+
+    @classmethod
+    def of_model(
+        cls,
+        run_index: int,
+        step: int,
+        gp: LandingErrorGP,
+        grid_x: np.ndarray,
+        grid_y: np.ndarray,
+        timings: dict[str, float],
+        record: ResynthesisRecord,
+    ) -> SynthesisEvent:
+        """The event of a synthesis with landing-error model ``gp``, mapped on the points
+        ``grid_x x grid_y``: per point the mean over the actions and the largest std."""
+        gx, gy = np.meshgrid(grid_x, grid_y, indexing="ij")
+        mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
+        mean, std = mean.mean(axis=1), std.max(axis=1)
+        shape = (*gx.shape, 2)
+        return cls(
+            run_index=run_index,
+            step=step,
+            grid_x=grid_x,
+            grid_y=grid_y,
+            gp_mean=mean.reshape(shape),
+            gp_std=std.reshape(shape),
+            p_worst_initial=record.p_worst_initial,
+            timings=dict(timings),
+            record=record,
+        )
 
 
 @dataclass(frozen=True)
@@ -249,7 +353,7 @@ class RunEnd:
     mission: MissionReport | None = None
 
     def __post_init__(self) -> None:
-        _check_choice("outcome", self.outcome, OUTCOMES)
+        object.__setattr__(self, "outcome", _mode("outcome", self.outcome, Outcome))
 
     @property
     def p_worst_trace(self) -> tuple[float, ...]:

@@ -27,7 +27,8 @@ One run (the paper's "Synthesis Approach", docs/design.md "Rewards and policies"
    plan's satisfying sub-model does it leave the plan (back to exploration with the latest
    synthesis, which may switch again); :attr:`~hopper_sim.events.RunEnd.left_plan_step`
    reports when.
-4. The automaton decides the outcome (:class:`planner.verdict.MissionMonitor`, one rule for
+4. The automaton decides the outcome (:func:`hopper_sim.episode.hop_outcome` on the product
+   state entered, :class:`planner.verdict.MissionMonitor` at the step cap; one rule for
    every class of formula): the run ends in success as soon as every hazard-free continuation
    satisfies the formula (for ``!Haz U Goal``: the goal; for ``F(a & F goal) & G !haz``: the
    goal after ``a``), in violation as soon as none does, on a hazard cell, off the map, or
@@ -42,18 +43,23 @@ learns the reward from visits and updates its Q-values online; it persists acros
 :meth:`NavigationRunner.run_many` (and can be saved and loaded), while the GP data is reset at
 every run, as in the paper.
 
-The runner never prints or plots: it calls an observer (:mod:`hopper_sim.events`).
+The loop (:meth:`NavigationRunner._run`) is a few lines, as dm_control's ``Environment.step``:
+decide, hop, land; the hooks ``_begin``, ``_land`` (with ``_learn`` and ``_replan``) and
+``_finish`` do the work on the run's :class:`~hopper_sim.episode.Episode`. The runner never
+prints or plots: it calls an observer (:mod:`hopper_sim.events`), with events built by their
+own constructors.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.episode import Episode, RunClock, hop_outcome
 from hopper_sim.error_prior import error_prior
 from hopper_sim.events import (
     HopEvent,
@@ -65,15 +71,17 @@ from hopper_sim.events import (
 )
 from planner._util.torch_threads import torch_threads
 from planner.gp.landing import FitSettings, LandingErrorGP
+from planner.imdp.analysis import accepting_states
 from planner.imdp.grid import ACTIONS
 from planner.imdp.product import check_product_size
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import Resynthesis, ResynthesisSettings, replan_reward, resynthesise
 from planner.ltl.translate import translate
-from planner.policy import SwitchingPolicy, SwitchingSettings
+from planner.modes import Outcome
+from planner.policy import Decision, SwitchingPolicy, SwitchingSettings
 from planner.qlearning import QLearningSettings, RobustQLearner
 from planner.scenario import Scenario
-from planner.verdict import ACCEPTED, REJECTED, AutomatonVerdicts, MissionMonitor, describe
+from planner.verdict import AutomatonVerdicts, MissionMonitor, describe
 
 
 @dataclass(frozen=True)
@@ -248,50 +256,24 @@ class NavigationRunner:
             settings=self.synthesis_settings,
         )
 
-    @staticmethod
-    def _record(step: int, res: Resynthesis, current: int) -> ResynthesisRecord:
-        fit, mec = res.fit, res.mec
-        values = res.satisfaction.values
-        gp = {}
-        for f in fields(fit):
-            value = np.asarray(getattr(fit, f.name))
-            if f.name != "num_data" and value.dtype.kind in "iuf" and np.isfinite(value).all():
-                gp[f.name] = tuple(float(v) for v in value.ravel())
-        return ResynthesisRecord(
-            step=step,
-            p_worst_current=float(np.clip(values[current], 0.0, 1.0)),
-            p_worst_initial=float(np.clip(values[res.product.initial], 0.0, 1.0)),
-            num_data=int(fit.num_data),
-            gp=gp,
-            mec_states=0 if mec is None else len(mec.component),
-            mec_probability=None if mec is None else float(mec.probability),
-            mec_average_reward=None if mec is None else float(mec.average_reward),
+    def _install(self, ep: Episode, res: Resynthesis, step: int) -> None:
+        """Hand a (re-)synthesis after ``step`` hops to the policy and the observer."""
+        ep.res = res
+        ep.clock.add_synthesis(res.timings)
+        ep.policy.resynthesise(
+            res.exploration,
+            res.goal,
+            res.satisfaction.values,
+            res.fallback,
+            rl=res.rl,
+            tour=res.tour,
         )
-
-    def _synthesis_event(
-        self,
-        run_index: int,
-        step: int,
-        gp: LandingErrorGP,
-        res: Resynthesis,
-        record: ResynthesisRecord,
-    ) -> SynthesisEvent:
-        gx, gy = np.meshgrid(self.map_x, self.map_y, indexing="ij")
-        mean, std = gp.predict(np.stack([gx.ravel(), gy.ravel()], axis=1))
-        # the map shows, per point, the mean over the actions and the largest std
-        mean, std = mean.mean(axis=1), std.max(axis=1)
-        shape = (*gx.shape, 2)
-        return SynthesisEvent(
-            run_index=run_index,
-            step=step,
-            grid_x=self.map_x,
-            grid_y=self.map_y,
-            gp_mean=mean.reshape(shape),
-            gp_std=std.reshape(shape),
-            p_worst_initial=record.p_worst_initial,
-            timings=dict(res.timings),
-            record=record,
+        record = ResynthesisRecord.of_synthesis(step, res, ep.pstate)
+        ep.records.append(record)
+        event = SynthesisEvent.of_model(
+            ep.run_index, step, ep.gp, self.map_x, self.map_y, res.timings, record
         )
+        self.observer.on_synthesis(event)
 
     # ------------------------------------------------------------------ runs
     def run(self, seed: int, run_index: int = 0) -> RunEnd:
@@ -300,7 +282,19 @@ class NavigationRunner:
             return self._run(seed, run_index)
 
     def _run(self, seed: int, run_index: int) -> RunEnd:
-        t_start = self.clock()
+        """The loop: decide, hop, land; the hooks below do the work."""
+        ep = self._begin(seed, run_index)
+        while ep.outcome is None and ep.steps < self.scenario.runner.max_steps:
+            decision = ep.policy.decide(ep.pstate, ep.rng)
+            allowed = np.asarray(decision.allowed, dtype=int)
+            with ep.clock.timed("hops"):
+                obs, reward, terminated, _, info = self.env.step(decision.action, allowed=allowed)
+            ep.outcome = self._land(ep, decision, obs, reward, terminated, info)
+        return self._finish(ep)
+
+    def _begin(self, seed: int, run_index: int) -> Episode:
+        """Reset the world, the data and the learner's collections; the initial synthesis."""
+        clock = RunClock(self.clock)
         # the third word seeded the old GP's k-means; kept so that a seed's draws stay the same
         env_seed, policy_seed, _ = np.random.SeedSequence(seed).generate_state(3)
         rng = np.random.default_rng(policy_seed)
@@ -309,146 +303,121 @@ class NavigationRunner:
         if self.learner is not None:
             self.learner.collected[:] = False
         gp = LandingErrorGP(self.gp_settings)
-        positions: list[np.ndarray] = []
-        errors: list[np.ndarray] = []
-        actions: list[int] = []
-        timings = {"gp_fit": 0.0, "abstraction": 0.0, "synthesis": 0.0, "hops": 0.0}
-        timings["replan"] = 0.0
-        records: list[ResynthesisRecord] = []
-        batch_max = 0.0
-
-        def install(res: Resynthesis, step: int, current: int) -> None:
-            nonlocal batch_max
-            for k, v in res.timings.items():
-                timings[k] = timings.get(k, 0.0) + v
-            batch_max = max(batch_max, sum(res.timings.values()))
-            policy.resynthesise(
-                res.exploration,
-                res.goal,
-                res.satisfaction.values,
-                res.fallback,
-                rl=res.rl,
-                tour=res.tour,
-            )
-            record = self._record(step, res, current)
-            records.append(record)
-            self.observer.on_synthesis(self._synthesis_event(run_index, step, gp, res, record))
-
-        res = self._synthesise(gp, positions, errors, actions, None)
+        res = self._synthesise(gp, [], [], [], None)
         product = res.product
         pstate = product.entry_state(obs["cell"])
         policy = SwitchingPolicy(self.switching, res.rl)
-        install(res, 0, pstate)
-        total, backups, steps, collections = 0.0, 0, 0, 0
         monitor = MissionMonitor(self.verdicts, self.scenario.runner.window)
-        outcome, reason = "timeout", "step cap"
-        verdict = monitor.start(int(product.automaton_state[pstate]))
-        if verdict == ACCEPTED:
-            outcome, reason = "success", "accepted at the start"
-        elif verdict == REJECTED:
-            outcome, reason = "violation", "rejected at the start"
-        rp = self.scenario.runner
-        while outcome == "timeout" and steps < rp.max_steps:
-            decision = policy.decide(pstate, rng)
-            t0 = self.clock()
-            obs, reward, terminated, _, info = self.env.step(
-                decision.action, allowed=np.asarray(decision.allowed, dtype=int)
-            )
-            timings["hops"] += self.clock() - t0
-            si = info["step"]
-            steps += 1
-            backups += int(si.decision.backup_used)
-            if not si.hop.ok:
-                outcome, reason = "violation", f"hop failed: {si.hop.status}"
-                break
-            positions.append(si.start_pos)
-            errors.append(si.error)
-            actions.append(int(si.decision.executed))
-            landed = int(obs["cell"])
-            first = bool(info.get("first_landing", False))
-            nxt = product.step(pstate, landed)
-            # the plan values a cell by what it still pays: a first landing in a cell with a
-            # (known or believed) nonzero reward changes the reward plan where cells pay once
-            believed = (
-                self.env.reward_table[landed]
-                if self.learner is None
-                else self.learner.cell_reward()[landed]
-            )
-            collections += int(first and self.env.reward_table[landed] != 0.0)
-            if self.learner is not None:
-                if self.pays_once:
-                    self.learner.collected[landed] = True
-                self.learner.update(
-                    product.model,
-                    pstate,
-                    si.decision.executed,
-                    nxt,
-                    reward,
-                    allowed=res.q_allowed,
-                    learn_reward=first or not self.pays_once,
-                )
-            total += reward
-            hop = si.hop
-            self.observer.on_hop(
-                HopEvent(
-                    run_index=run_index,
-                    step=steps - 1,
-                    phase=decision.phase,
-                    source=decision.source,
-                    backup=si.decision.backup_used,
-                    requested_action=ACTIONS[si.decision.requested],
-                    executed_action=ACTIONS[si.decision.executed],
-                    start_pos=si.start_pos,
-                    target=si.target,
-                    landing=obs["pos"],
-                    com_path=hop.com_path if len(hop.com_path) else np.zeros((0, 3)),
-                    foot=hop.foot,
-                    touchdown_time=hop.touchdown_time,
-                    cell=landed,
-                    product_state=nxt,
-                    p_worst=float(res.satisfaction.values[nxt]),
-                    reward=reward,
-                    total_reward=total,
-                    com_time=hop.com_path_time if len(hop.com_path) else None,
-                )
-            )
-            pstate = nxt
-            verdict = monitor.step(int(product.letters[landed]), int(product.automaton_state[nxt]))
-            if terminated:
-                outcome = "violation"
-                reason = "left the map" if landed == self.grid.out else "hazard"
-            elif verdict == REJECTED:
-                outcome, reason = "violation", "specification violated"
-            elif verdict == ACCEPTED:
-                outcome, reason = "success", "specification satisfied"
-            elif steps % rp.batch_size == 0:
-                res = self._synthesise(gp, positions, errors, actions, pstate, res)
-                product = res.product
-                install(res, steps, pstate)
-            elif self.pays_once and first and believed != 0.0:
-                t0 = self.clock()
-                q_sol, rl, tour = self._replan_reward(res)
-                res = replace(res, q=q_sol, rl=rl, tour=tour)
-                policy.replan_reward(rl, tour)
-                timings["replan"] += self.clock() - t0
-        timings["batch_max"] = batch_max
-        mission = monitor.report(bool(product.accepting_states()[pstate]))
-        if outcome == "timeout":
-            outcome, reason = describe(mission)
+        ep = Episode(run_index, rng, gp, clock, res, policy, pstate, monitor)
+        self._install(ep, res, 0)
+        monitor.start(product.automaton_state_of(pstate))
+        ep.outcome = hop_outcome(product, self.verdicts, pstate, start=True)
+        return ep
+
+    def _land(
+        self,
+        ep: Episode,
+        decision: Decision,
+        obs: dict,
+        reward: float,
+        terminated: bool,
+        info: dict,
+    ) -> tuple[Outcome, str] | None:
+        """After a hop: record its data, learn, report it, follow the automaton; the
+        outcome if the run ends here, else re-plan as due."""
+        si = info["step"]
+        ep.steps += 1
+        ep.backups += int(si.decision.backup_used)
+        if not si.hop.ok:
+            return Outcome.VIOLATION, f"hop failed: {si.hop.status}"
+        ep.positions.append(si.start_pos)
+        ep.errors.append(si.error)
+        ep.actions.append(int(si.decision.executed))
+        landed = int(obs["cell"])
+        first = bool(info.get("first_landing", False))
+        product = ep.res.product
+        nxt = product.step(ep.pstate, landed)
+        # the plan values a cell by what it still pays: a first landing in a cell with a
+        # (known or believed) nonzero reward changes the reward plan where cells pay once
+        believed = (
+            self.env.reward_table[landed]
+            if self.learner is None
+            else self.learner.cell_reward()[landed]
+        )
+        ep.collections += int(first and self.env.reward_table[landed] != 0.0)
+        self._learn(ep, int(si.decision.executed), landed, nxt, reward, first)
+        ep.total += reward
+        p_worst = float(ep.res.satisfaction.values[nxt])
+        event = HopEvent.of_hop(
+            ep.run_index,
+            ep.steps - 1,
+            decision,
+            si,
+            obs["pos"],
+            landed,
+            product_state=nxt,
+            p_worst=p_worst,
+            reward=reward,
+            total_reward=ep.total,
+        )
+        self.observer.on_hop(event)
+        ep.pstate = nxt
+        ep.monitor.step(product.letter_of(nxt), product.automaton_state_of(nxt))
+        outcome = hop_outcome(product, self.verdicts, nxt, terminated=terminated, out=self.grid.out)
+        if outcome is None:
+            self._replan(ep, paid_cell=first and believed != 0.0)
+        return outcome
+
+    def _learn(
+        self, ep: Episode, action: int, landed: int, nxt: int, reward: float, first: bool
+    ) -> None:
+        """An unknown reward's learner: the landing's collection and its Q-update."""
+        if self.learner is None:
+            return
+        if self.pays_once:
+            self.learner.collected[landed] = True
+        self.learner.update(
+            ep.res.product.model,
+            ep.pstate,
+            action,
+            nxt,
+            reward,
+            allowed=ep.res.q_allowed,
+            learn_reward=first or not self.pays_once,
+        )
+
+    def _replan(self, ep: Episode, paid_cell: bool) -> None:
+        """After a full batch the re-synthesis; else, after a first landing in a cell with a
+        nonzero reward where cells pay once, the reward plan."""
+        if ep.steps % self.scenario.runner.batch_size == 0:
+            res = self._synthesise(ep.gp, ep.positions, ep.errors, ep.actions, ep.pstate, ep.res)
+            self._install(ep, res, ep.steps)
+        elif self.pays_once and paid_cell:
+            with ep.clock.timed("replan"):
+                q_sol, rl, tour = self._replan_reward(ep.res)
+                ep.res = replace(ep.res, q=q_sol, rl=rl, tour=tour)
+                ep.policy.replan_reward(rl, tour)
+
+    def _finish(self, ep: Episode) -> RunEnd:
+        """Judge the run (at the step cap: its last window) and report its end."""
+        in_accepting = bool(accepting_states(ep.res.product)[ep.pstate])
+        mission = ep.monitor.report(in_accepting)
+        outcome, reason = ep.outcome or describe(mission)
+        policy = ep.policy
         end = RunEnd(
-            run_index=run_index,
+            run_index=ep.run_index,
             outcome=outcome,
-            steps=steps,
-            reward=total,
+            steps=ep.steps,
+            reward=ep.total,
             switch_step=policy.switch_step,
             p_switch=policy.switch_probability,
-            backups=backups,
-            seconds=self.clock() - t_start,
-            timings=timings,
+            backups=ep.backups,
+            seconds=ep.clock.elapsed(),
+            timings=ep.clock.report(),
             reason=reason,
             left_plan_step=policy.left_plan_step,
-            resyntheses=tuple(records),
-            collections=collections,
+            resyntheses=tuple(ep.records),
+            collections=ep.collections,
             mission=mission,
         )
         self.observer.on_run_end(end)

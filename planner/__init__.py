@@ -42,6 +42,8 @@ _EXPORTS: dict[str, str] = {
     "IMDP": "planner.imdp",
     "GridWorld": "planner.imdp",
     "ProductIMDP": "planner.imdp",
+    "satisfaction": "planner.imdp.analysis",
+    "labelled_model": "planner.imdp.analysis",
     "Problem": "planner.imdp",
     "Specification": "planner.imdp",
     "ReachAvoid": "planner.imdp",

@@ -71,13 +71,8 @@ from typing import Protocol
 import numpy as np
 
 from planner.errors import PolicyError
+from planner.modes import Phase, Source
 from planner.tour import ComponentTour
-
-EXPLORATION = "exploration"
-GOAL_REACHING = "goal_reaching"
-FALLBACK = "fallback"
-LTL = "LTL"
-RL = "RL"
 
 
 class RLActor(Protocol):
@@ -153,8 +148,8 @@ class Decision:
     """
 
     action: int
-    phase: str
-    source: str
+    phase: Phase
+    source: Source
     allowed: tuple[int, ...]
     p_rl: float
     phase_step: int
@@ -175,7 +170,7 @@ def _mix(
     rng: np.random.Generator,
     tour: ComponentTour | None = None,
     last_visit: np.ndarray | None = None,
-) -> tuple[int, str, np.ndarray]:
+) -> tuple[int, Source, np.ndarray]:
     allowed = np.asarray(plan.allowed[state], dtype=bool)
     if not allowed.any():
         raise PolicyError(f"state {state} has no allowed action in this phase's sub-model")
@@ -189,8 +184,8 @@ def _mix(
         action = int(rl.act(state, allowed, rng, prefer=ltl))
         if not allowed[action]:
             raise PolicyError(f"state {state}: the RL actor chose action {action}, not allowed")
-        return action, RL, allowed
-    return ltl, LTL, allowed
+        return action, Source.RL, allowed
+    return ltl, Source.LTL, allowed
 
 
 class ExplorationPolicy:
@@ -205,7 +200,7 @@ class ExplorationPolicy:
 
     def choose(
         self, state: int, rng: np.random.Generator, last_visit: np.ndarray | None = None
-    ) -> tuple[int, str, np.ndarray]:
+    ) -> tuple[int, Source, np.ndarray]:
         """``(action, source, allowed mask)`` in ``state``; ``last_visit`` (per state, -1:
         never) feeds the tour."""
         return _mix(self.plan, self.rl, state, self.p_rl, rng, self.tour, last_visit)
@@ -223,7 +218,9 @@ class GoalReachingPolicy:
         """``P_RL,gr = C exp(-eps m)``."""
         return self.c * float(np.exp(-self.eps * m))
 
-    def choose(self, state: int, m: int, rng: np.random.Generator) -> tuple[int, str, np.ndarray]:
+    def choose(
+        self, state: int, m: int, rng: np.random.Generator
+    ) -> tuple[int, Source, np.ndarray]:
         return _mix(self.plan, self.rl, state, self.p_rl(m), rng)
 
 
@@ -268,7 +265,7 @@ class SwitchingPolicy:
         plans in use."""
         if self.last_visit is not None:
             self.last_visit[:] = -1
-        self.phase = EXPLORATION
+        self.phase = Phase.EXPLORATION
         self.phase_step = 0
         self.step = 0
         self.switch_step: int | None = None
@@ -281,7 +278,7 @@ class SwitchingPolicy:
     @property
     def following_switch_plan(self) -> bool:
         """Whether the goal-reaching plan in use is kept from a switch (not replaced)."""
-        return self.phase == GOAL_REACHING and self.settings.keep_goal_plan
+        return self.phase == Phase.GOAL_REACHING and self.settings.keep_goal_plan
 
     def resynthesise(
         self,
@@ -354,29 +351,30 @@ class SwitchingPolicy:
         if not 0 <= state < self.sat_probability.size:
             raise PolicyError(f"state {state} is not in [0, {self.sat_probability.size})")
         switched = False
-        if self.phase == GOAL_REACHING and not np.asarray(self.goal.plan.allowed[state]).any():
+        left = not np.asarray(self.goal.plan.allowed[state]).any()
+        if self.phase == Phase.GOAL_REACHING and left:
             # the state left the goal-reaching plan in use: back to exploration, latest plans
-            self.phase, self.phase_step, switched = EXPLORATION, 0, True
+            self.phase, self.phase_step, switched = Phase.EXPLORATION, 0, True
             if self.settings.keep_goal_plan and self.left_plan_step is None:
                 self.left_plan_step = self.step
             self.goal, self.goal_sat_probability = self.latest_goal, self.sat_probability
         sat = float(self.sat_probability[state])
         goal_ok = bool(np.asarray(self.latest_goal.plan.allowed[state]).any())
-        if self.phase == EXPLORATION and sat > self.settings.p_sat and goal_ok:
-            self.phase, self.phase_step, switched = GOAL_REACHING, 0, True
+        if self.phase == Phase.EXPLORATION and sat > self.settings.p_sat and goal_ok:
+            self.phase, self.phase_step, switched = Phase.GOAL_REACHING, 0, True
             self.goal, self.goal_sat_probability = self.latest_goal, self.sat_probability
             self.switches += 1
             if self.switch_step is None:
                 self.switch_step, self.switch_probability = self.step, sat
-        if self.phase == GOAL_REACHING:
+        if self.phase == Phase.GOAL_REACHING:
             sat = float(self.goal_sat_probability[state])
         explore_ok = bool(np.asarray(self.exploration.plan.allowed[state]).any())
         phase = self.phase
-        if self.phase == GOAL_REACHING:
+        if self.phase == Phase.GOAL_REACHING:
             p_rl = self.goal.p_rl(self.phase_step)
             action, source, allowed = self.goal.choose(state, self.phase_step, rng)
         elif not explore_ok and self.fallback is not None:
-            phase, p_rl = FALLBACK, 0.0
+            phase, p_rl = Phase.FALLBACK, 0.0
             action, source, allowed = self.fallback.choose(state, rng)
         else:
             p_rl = self.exploration.p_rl

@@ -43,8 +43,9 @@ from planner.errors import PolicyError
 from planner.imdp import graph
 from planner.imdp.graph import EndComponent
 from planner.imdp.model import IMDP
+from planner.modes import TourMode
 
-TOUR_MODES: tuple[str, ...] = ("reward", "coverage")
+TOUR_MODES: tuple[str, ...] = tuple(m.value for m in TourMode)
 """``reward``: rewarding cells first, then as ``coverage``; ``coverage``: least recently visited
 (then least known) cells first."""
 
@@ -74,7 +75,7 @@ class ComponentTour:
     state_cell: np.ndarray
     reward: np.ndarray
     uncertainty: np.ndarray
-    mode: str = "reward"
+    mode: TourMode = TourMode.REWARD
     aim: np.ndarray | None = None
     _rows: np.ndarray = field(init=False, repr=False)
     _inside: np.ndarray = field(init=False, repr=False)
@@ -143,7 +144,7 @@ class ComponentTour:
         cand = self._inside & (cells != here)
         if not cand.any():
             return cand
-        if self.mode == "reward":
+        if self.mode == TourMode.REWARD:
             paying = cand & (self.reward > 0.0)
             if paying.any():
                 return paying & (self.reward >= self.reward[paying].max())

@@ -37,6 +37,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from planner.automaton import RabinAutomaton
+from planner.modes import Outcome
 
 ACCEPTED = "accepted"
 REJECTED = "rejected"
@@ -307,12 +308,12 @@ class MissionMonitor:
         )
 
 
-def describe(report: MissionReport) -> tuple[str, str]:
+def describe(report: MissionReport) -> tuple[Outcome, str]:
     """``(outcome, reason)`` of a run that ended at its step cap with ``report``:
     ``"satisfying"`` if its last window, repeated forever, satisfies the formula, else
     ``"timeout"``; the reason names what remains."""
     if not report.window_accepted:
-        return "timeout", "step cap"
+        return Outcome.TIMEOUT, "step cap"
     visits = ", ".join(f"pair {i}: {v}" for i, v in enumerate(report.pair_visits))
     labels = ", ".join(f"{k}: {v}" for k, v in report.label_visits.items())
     ec = {True: "; in an accepting end component", False: "; outside every accepting end component"}
@@ -322,7 +323,7 @@ def describe(report: MissionReport) -> tuple[str, str]:
     else:
         what = "the remaining obligation is to repeat it infinitely often"
     return (
-        "satisfying",
+        Outcome.SATISFYING,
         f"{report.obligation}: the last {report.window} hops repeated forever satisfy the "
         f"formula (G visits {visits}; landings {labels}){where}; {what}",
     )

@@ -203,6 +203,7 @@ def scenario_product_model(name: str):
     """The labelled MT-PIMDP of scenario ``name`` under the GP prior (see the module doc)."""
     from hopper_sim.model import HopperModel
     from planner.gp.landing import LandingErrorGP
+    from planner.imdp.analysis import labelled_model
     from planner.imdp.grid import GridWorld
     from planner.imdp.product import ProductIMDP
     from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
@@ -215,7 +216,7 @@ def scenario_product_model(name: str):
     bounds = cell_error_bounds(LandingErrorGP(), grid)
     ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
     model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])
-    return ProductIMDP(model, translate(sc.formula), sc.state_rewards).labelled_model()
+    return labelled_model(ProductIMDP(model, translate(sc.formula), sc.state_rewards))
 
 
 def run_export(args: argparse.Namespace) -> int:

@@ -1,6 +1,7 @@
 """Interval MDPs: models, the grid abstraction, the product with a Rabin automaton,
 graph analyses and robust value iteration."""
 
+from planner.imdp.analysis import MecChoice
 from planner.imdp.graph import EndComponent, SubModel
 from planner.imdp.grid import ACTIONS, GridWorld
 from planner.imdp.model import BOUND_TOLERANCE, IMDP
@@ -9,7 +10,7 @@ from planner.imdp.ordering import (
     best_case_expectation,
     worst_case_expectation,
 )
-from planner.imdp.product import MecChoice, ProductIMDP
+from planner.imdp.product import ProductIMDP
 from planner.imdp.solve import (
     DiscountedReward,
     Problem,

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.errors import UnknownPropositionError
+from planner.imdp.analysis import satisfaction
 from planner.imdp.model import IMDP
 from planner.imdp.product import ProductIMDP
 from planner.imdp.solve import Solution, ValueIteration
@@ -32,6 +33,7 @@ from planner.ltl.budget import TranslationLimits
 from planner.ltl.parser import parse
 from planner.ltl.syntax import to_string
 from planner.ltl.translate import translate
+from planner.modes import Adversary
 
 
 @dataclass(frozen=True)
@@ -88,7 +90,8 @@ def check_ltl(
         )
     automaton = translate(f, props, limits)
     product = ProductIMDP(model, automaton)
-    sol = product.satisfaction(pessimistic=not optimistic, algorithm=algorithm)
+    adversary = Adversary.OPTIMISTIC if optimistic else Adversary.PESSIMISTIC
+    sol = satisfaction(product, adversary, algorithm=algorithm)
     entry = (
         np.arange(model.n_states, dtype=np.int64) * product.n_q
         + automaton.transitions[automaton.initial, product.letters]

@@ -30,6 +30,7 @@ from planner.imdp.kernels import (
     rows_staying_in,
 )
 from planner.imdp.model import IMDP, first_of_runs
+from planner.modes import Adversary
 
 
 @dataclass(frozen=True)
@@ -268,7 +269,7 @@ def maximal_end_components(
     every adversary (it can cut edges with ``lower == 0``); use
     :func:`accepting_end_components` for the robust acceptance question.
     """
-    if mode not in ("pessimistic", "optimistic"):
+    if mode not in tuple(Adversary):
         raise SpecificationError(f"mode must be 'pessimistic' or 'optimistic', got {mode!r}")
     comp, kept = end_component_labels(model, rows, states, mode)
     return components_from_labels(model, comp, kept)

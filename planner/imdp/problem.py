@@ -13,6 +13,7 @@ import numpy as np
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.model import IMDP
+from planner.modes import Adversary, Objective
 
 StateSet = np.ndarray | str | Sequence[str] | Sequence[int]
 
@@ -43,20 +44,21 @@ class Specification:
 
     Args:
         property: :class:`ReachAvoid` or :class:`DiscountedReward`.
-        satisfaction: ``"pessimistic"`` (adversary opposes) or ``"optimistic"``.
-        strategy: ``"maximize"`` or ``"minimize"``.
+        satisfaction: the adversary, :class:`~planner.modes.Adversary`: ``"pessimistic"``
+            (it opposes) or ``"optimistic"``.
+        strategy: :class:`~planner.modes.Objective`: ``"maximize"`` or ``"minimize"``.
     """
 
     property: ReachAvoid | DiscountedReward
-    satisfaction: str = "pessimistic"
-    strategy: str = "maximize"
+    satisfaction: Adversary = Adversary.PESSIMISTIC
+    strategy: Objective = Objective.MAXIMIZE
 
     def __post_init__(self) -> None:
-        if self.satisfaction not in ("pessimistic", "optimistic"):
+        if self.satisfaction not in tuple(Adversary):
             raise SpecificationError(
                 f"satisfaction must be 'pessimistic' or 'optimistic', got {self.satisfaction!r}"
             )
-        if self.strategy not in ("maximize", "minimize"):
+        if self.strategy not in tuple(Objective):
             raise SpecificationError(
                 f"strategy must be 'maximize' or 'minimize', got {self.strategy!r}"
             )

@@ -67,6 +67,7 @@ from planner.imdp.problem import (
 )
 from planner.imdp.reachability import reach_values
 from planner.imdp.strategy import strategy_actions
+from planner.modes import Adversary, Objective
 
 __all__ = [
     "DiscountedReward",
@@ -136,8 +137,8 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
     m = problem.model
     spec = problem.specification
     prop = spec.property
-    maximize = spec.strategy == "maximize"
-    pessimistic = spec.satisfaction == "pessimistic"
+    maximize = spec.strategy == Objective.MAXIMIZE
+    pessimistic = spec.satisfaction == Adversary.PESSIMISTIC
     adversary_minimizes = maximize == pessimistic
     rows = problem.row_mask()
     fixed = ~graph.has_row(m, rows)

@@ -8,14 +8,11 @@ from planner.gp import FitSettings, LandingErrorGP
 from planner.imdp import IMDP
 from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import (
-    ResynthesisSettings,
-    frontier_strategy,
-    replan_reward,
-    resynthesise,
-)
-from planner.policy import FALLBACK, GOAL_REACHING, SwitchingPolicy, SwitchingSettings
+from planner.learning import ResynthesisSettings, replan_reward, resynthesise
+from planner.modes import Phase
+from planner.policy import SwitchingPolicy, SwitchingSettings
 from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
+from planner.synthesis import frontier_strategy
 from tests.planner.conftest import smooth_error
 from tests.planner.imdp.helpers import until_automaton
 
@@ -74,7 +71,7 @@ def test_simulated_run_reaches_the_goal_safely_and_is_reproducible():
     events, last, policy, r = _run(0)
     assert "Goal" in last and "Haz" not in last
     assert policy.switch_probability is not None and policy.switch_probability > 0.65
-    assert any(e[0] == GOAL_REACHING for e in events)
+    assert any(e[0] == Phase.GOAL_REACHING for e in events)
     assert set(r.timings) == {"gp_fit", "abstraction", "synthesis"}
     assert r.intervals.num_states == N * N + 1
     again, *_ = _run(0)
@@ -106,7 +103,7 @@ def test_prior_start_in_a_corner_falls_back():
     policy = SwitchingPolicy(SwitchingSettings(), r.rl)
     policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
     d = policy.decide(corner, np.random.default_rng(0))
-    assert d.phase == FALLBACK and grid.enabled[0, d.action]
+    assert d.phase == Phase.FALLBACK and grid.enabled[0, d.action]
     policy.resynthesise(r.exploration, r.goal, r.satisfaction.values)
     with pytest.raises(PolicyError, match="no allowed action"):
         policy.decide(corner, np.random.default_rng(0))

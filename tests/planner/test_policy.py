@@ -4,15 +4,8 @@ import numpy as np
 import pytest
 
 from planner.errors import PolicyError
-from planner.policy import (
-    EXPLORATION,
-    GOAL_REACHING,
-    LTL,
-    RL,
-    PhasePlan,
-    SwitchingPolicy,
-    SwitchingSettings,
-)
+from planner.modes import Phase, Source
+from planner.policy import PhasePlan, SwitchingPolicy, SwitchingSettings
 from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
 from planner.tour import ComponentTour
 
@@ -43,13 +36,13 @@ def test_only_allowed_actions_of_the_current_phase():
     phases = set()
     for state in rng.integers(0, N, 600):
         d = policy.decide(int(state), rng)
-        plan = goal if d.phase == GOAL_REACHING else explore
+        plan = goal if d.phase == Phase.GOAL_REACHING else explore
         assert plan.allowed[state, d.action]
         assert d.allowed == tuple(np.flatnonzero(plan.allowed[state]).tolist())
-        if d.source == LTL:
+        if d.source == Source.LTL:
             assert d.action == plan.ltl_action[state]
         phases.add(d.phase)
-    assert phases == {EXPLORATION, GOAL_REACHING}
+    assert phases == {Phase.EXPLORATION, Phase.GOAL_REACHING}
 
 
 def test_switch_when_worst_case_probability_exceeds_p_sat():
@@ -58,15 +51,15 @@ def test_switch_when_worst_case_probability_exceeds_p_sat():
     sat[[2, 3]] = [0.65, 0.7]
     policy.resynthesise(explore, goal, sat)
     rng = np.random.default_rng(0)
-    assert policy.decide(0, rng).phase == EXPLORATION
-    assert policy.decide(2, rng).phase == EXPLORATION  # equal is not "exceeds"
+    assert policy.decide(0, rng).phase == Phase.EXPLORATION
+    assert policy.decide(2, rng).phase == Phase.EXPLORATION  # equal is not "exceeds"
     d = policy.decide(3, rng)
-    assert d.phase == GOAL_REACHING and d.switched and d.phase_step == 0
+    assert d.phase == Phase.GOAL_REACHING and d.switched and d.phase_step == 0
     assert policy.switch_step == 2 and policy.switch_probability == pytest.approx(0.7)
     d = policy.decide(0, rng)  # stays in goal reaching where the probability is low again
-    assert d.phase == GOAL_REACHING and not d.switched and d.phase_step == 1
+    assert d.phase == Phase.GOAL_REACHING and not d.switched and d.phase_step == 1
     policy.reset()
-    assert policy.phase == EXPLORATION and policy.switch_step is None
+    assert policy.phase == Phase.EXPLORATION and policy.switch_step is None
 
 
 def _without(plan: PhasePlan, states: list[int]) -> PhasePlan:
@@ -85,21 +78,21 @@ def test_goal_plan_of_the_switch_is_kept_until_the_state_leaves_it():
     later = _without(goal, [5])
     policy.resynthesise(explore, later, np.full(N, 0.2))
     d = policy.decide(5, rng)
-    assert d.phase == GOAL_REACHING and not d.switched and goal.allowed[5, d.action]
+    assert d.phase == Phase.GOAL_REACHING and not d.switched and goal.allowed[5, d.action]
     assert d.sat_probability == pytest.approx(0.9)  # under the synthesis of the switch
     assert policy.left_plan_step is None
     # a state outside the kept plan: the run leaves it (reported), back to exploration
     policy.reset()
     policy.resynthesise(explore, _without(goal, [7]), sat)
-    assert policy.decide(3, rng).phase == GOAL_REACHING
+    assert policy.decide(3, rng).phase == Phase.GOAL_REACHING
     policy.resynthesise(explore, goal, np.full(N, 0.2))
     d = policy.decide(7, rng)
-    assert d.phase == EXPLORATION and d.switched and policy.left_plan_step == 1
+    assert d.phase == Phase.EXPLORATION and d.switched and policy.left_plan_step == 1
     assert policy.switch_step == 0 and policy.switches == 1
     # from there the latest synthesis may switch again; the first switch stays reported
     policy.resynthesise(explore, goal, sat)
     d = policy.decide(7, rng)
-    assert d.phase == GOAL_REACHING and d.switched and policy.switches == 2
+    assert d.phase == Phase.GOAL_REACHING and d.switched and policy.switches == 2
     assert policy.switch_step == 0 and policy.left_plan_step == 1
 
 
@@ -108,10 +101,10 @@ def test_replanning_goal_reaching_returns_to_exploration():
     sat = np.full(N, 0.9)
     policy.resynthesise(explore, goal, sat)
     rng = np.random.default_rng(0)
-    assert policy.decide(3, rng).phase == GOAL_REACHING
+    assert policy.decide(3, rng).phase == Phase.GOAL_REACHING
     policy.resynthesise(explore, _without(goal, [5]), np.full(N, 0.2))
     d = policy.decide(5, rng)
-    assert d.phase == EXPLORATION and d.switched and policy.left_plan_step is None
+    assert d.phase == Phase.EXPLORATION and d.switched and policy.left_plan_step is None
 
 
 def test_rl_probabilities_follow_the_settings():
@@ -120,14 +113,14 @@ def test_rl_probabilities_follow_the_settings():
     policy.resynthesise(explore, goal, np.zeros(N))
     rng = np.random.default_rng(3)
     ds = [policy.decide(int(s), rng) for s in rng.choice(ltl_ok, 300)]
-    assert all(d.source == LTL for d in ds)  # P_RL,ee = 0
+    assert all(d.source == Source.LTL for d in ds)  # P_RL,ee = 0
     policy.resynthesise(explore, goal, np.ones(N))
     policy.reset()
     ds = [policy.decide(int(s), rng) for s in rng.choice(ltl_ok, 400)]
     m = np.arange(400)
     np.testing.assert_allclose([d.p_rl for d in ds], 0.8 * np.exp(-0.01 * m))
-    rl_first = np.mean([d.source == RL for d in ds[:100]])
-    rl_last = np.mean([d.source == RL for d in ds[300:]])
+    rl_first = np.mean([d.source == Source.RL for d in ds[:100]])
+    rl_last = np.mean([d.source == Source.RL for d in ds[300:]])
     assert 0.36 < rl_first < 0.66 and rl_last < 0.12  # expected 0.51 and 0.03
 
 
@@ -135,7 +128,7 @@ def test_missing_ltl_action_falls_back_to_rl():
     policy, explore, _ = _policy(p_rl_explore=0.0, p_sat=1.0)
     state = int(np.flatnonzero(explore.ltl_action == -1)[0])
     d = policy.decide(state, np.random.default_rng(0))
-    assert d.source == RL and explore.allowed[state, d.action]
+    assert d.source == Source.RL and explore.allowed[state, d.action]
 
 
 def test_same_seed_same_decisions():
@@ -181,7 +174,7 @@ def test_rl_ties_take_the_ltl_action():
     policy.resynthesise(explore, goal, np.zeros(N))
     for s in np.flatnonzero(explore.ltl_action >= 0):
         d = policy.decide(int(s), rng)
-        assert d.source == RL and d.action == explore.ltl_action[s]
+        assert d.source == Source.RL and d.action == explore.ltl_action[s]
 
 
 def test_exploration_follows_the_tour_inside_its_component_and_remembers_visits():
@@ -201,7 +194,7 @@ def test_exploration_follows_the_tour_inside_its_component_and_remembers_visits(
     s, seen = 12, {12}
     for _ in range(40):
         d = policy.decide(s, rng)
-        assert d.source == LTL and model.enabled[s, d.action]
+        assert d.source == Source.LTL and model.enabled[s, d.action]
         s = int(model.successor[model.row_ptr[model.row_index[s, d.action]]])
         seen.add(s)
     assert seen == set(range(n))

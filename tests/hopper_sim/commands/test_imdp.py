@@ -5,6 +5,7 @@ import pytest
 
 from hopper_sim.cli import main
 from planner.imdp import Problem, ReachAvoid, Specification, solve
+from planner.imdp.analysis import failure_states, labelled_model, satisfaction
 from planner.imdp.grid import GridWorld
 from planner.imdp.io import read_model, write_model
 from planner.imdp.product import ProductIMDP
@@ -75,11 +76,11 @@ def test_product_export_round_trip(tmp_path):
     g = GridWorld(4, 1, labels=[(), ("Haz",), (), ("Goal",)])
     p = ProductIMDP(g.imdp_from_intervals(*corridor_intervals(g, 0.3)), until_automaton())
     for name in ("p.tra", "p.drn"):
-        write_model(p.labelled_model(), tmp_path / name)
+        write_model(labelled_model(p), tmp_path / name)
         back = read_model(tmp_path / name)
         v = solve(Problem(back, Specification(ReachAvoid("accept")))).values
-        assert v == pytest.approx(p.satisfaction().values, abs=1e-12)
-        assert back.states_labelled("fail").tolist() == p.failure_states().tolist()
+        assert v == pytest.approx(satisfaction(p).values, abs=1e-12)
+        assert back.states_labelled("fail").tolist() == failure_states(p).tolist()
 
 
 def test_export_scenario_product(tmp_path, capsys):

@@ -4,8 +4,20 @@ import pytest
 from planner.automaton import RabinAutomaton
 from planner.errors import ProductError
 from planner.imdp import IMDP
+from planner.imdp.analysis import (
+    accepting_end_components,
+    choose_mec,
+    end_components,
+    failure_states,
+    goal_strategy,
+    nonviolating,
+    satisfaction,
+    satisfying,
+    steer_strategy,
+)
 from planner.imdp.grid import ACTIONS, GridWorld
 from planner.imdp.product import ProductIMDP
+from planner.modes import Adversary
 from tests.planner.imdp.helpers import corridor_intervals, until_automaton
 
 
@@ -31,32 +43,53 @@ def test_product_structure_and_initial_state():
     assert p.model.lower[sl].tolist() == [0.0, 0.8, 0.0]
 
 
+def test_the_product_answers_the_automaton_questions_of_a_product_state():
+    # corridor: cell 0 Haz, cell 4 Goal; automaton 0 waiting, 1 accepted, 2 rejected
+    g, m = corridor()
+    p = ProductIMDP(m, until_automaton())
+    s = p.state_index(3, 0)
+    assert (p.base_state_of(s), p.automaton_state_of(s)) == (3, 0)
+    assert p.letter_of(p.state_index(4, 1)) == 1 and p.letter_of(p.state_index(0, 2)) == 2
+    assert p.letter_of(s) == 0
+    # the sinks (accepted, rejected) are absorbing, the waiting state is not
+    assert p.absorbing.tolist() == [q != 0 for q in p.automaton_state]
+    nxt = np.array([4, 0, 2, g.out])
+    stepped = p.steps(np.full(4, s), nxt)
+    assert stepped.tolist() == [p.step(s, int(t)) for t in nxt]
+    assert stepped.tolist() == [
+        p.state_index(4, 1),
+        p.state_index(0, 2),
+        p.state_index(2, 0),
+        p.state_index(g.out, 2),
+    ]
+
+
 def test_failure_nonviolating_and_satisfaction():
     g, m = corridor()
     p = ProductIMDP(m, until_automaton())
-    fail = p.failure_states()
+    fail = failure_states(p)
     q = p.automaton_state
     assert fail[q == 2].all() and not fail[q == 1].any()
     assert not fail[p.state_index(np.arange(1, 5), 0)].any()
-    sub = p.nonviolating()
+    sub = nonviolating(p)
     # at q0 an action is allowed iff its target is not next to the hazard cell 0
     for c in range(1, 4):
         s = p.state_index(c, 0)
         expect = [bool(g.enabled[c, a] and g.target_cell[c, a] >= 2) for a in range(8)]
         assert sub.actions[s].tolist() == expect
-    sat = p.satisfaction()
+    sat = satisfaction(p)
     assert sat.values[p.state_index(np.arange(1, 5), 0)].tolist() == [1.0] * 4
     assert (sat.values[q == 2] == 0).all() and (sat.values[q == 1] == 1).all()
     # every accepting component lives at q1
-    assert all((q[ec.states] == 1).all() for ec in p.accepting_end_components())
+    assert all((q[ec.states] == 1).all() for ec in accepting_end_components(p))
     # exploration candidates: end components of the nonviolating sub-model
-    for ec in p.end_components(sub.actions):
+    for ec in end_components(p, sub.actions):
         assert not fail[ec.states].any()
         assert sub.actions[p.model.row_state[ec.rows], p.model.row_action[ec.rows]].all()
     # at q0 every allowed hop may spill towards the goal (q1): no end component there
-    assert p.end_components(sub.actions)
-    assert not any((q[ec.states] == 0).any() for ec in p.end_components(sub.actions))
-    strat = p.goal_strategy(allowed=sub.actions)
+    assert end_components(p, sub.actions)
+    assert not any((q[ec.states] == 0).any() for ec in end_components(p, sub.actions))
+    strat = goal_strategy(p, allowed=sub.actions)
     for c in (1, 2, 3):
         a = strat[p.state_index(c, 0)]
         assert a >= 0 and sub.actions[p.state_index(c, 0), a]
@@ -67,9 +100,9 @@ def test_satisfying_submodel_threshold():
     g = GridWorld(4, 1, labels=[(), ("Haz",), (), ("Goal",)])
     m = g.imdp_from_intervals(*corridor_intervals(g, spill=0.3), initial=[0])
     p = ProductIMDP(m, until_automaton())
-    sol = p.satisfaction()
+    sol = satisfaction(p)
     v = sol.values
-    assert np.all(v <= p.satisfaction(pessimistic=False).values + 1e-12)
+    assert np.all(v <= satisfaction(p, Adversary.OPTIMISTIC).values + 1e-12)
     s0, s2 = p.state_index(0, 0), p.state_index(2, 0)
     # from 0: E2 aims at 2, the adversary sends .3 into the hazard and .7 to cell 2 (value 1)
     assert v[s2] == 1.0
@@ -78,15 +111,15 @@ def test_satisfying_submodel_threshold():
     e1, e2, w1, w2 = (ACTIONS.index(x) for x in ("E1", "E2", "W1", "W2"))
     assert sol.strategy[s0] == e2
     assert sol.q_values[p.model.row_index[s0, e1]] == pytest.approx(0.0, abs=1e-12)
-    sub = p.satisfying(0.65)
+    sub = satisfying(p, 0.65)
     assert sub.states[s0] and sub.actions[s0].tolist() == [a == e2 for a in range(8)]
     # W2 from 2 is worth .3 * 0 + .7 * 0.7 = 0.49 < .65; W1 aims at the hazard
     assert sub.actions[s2].tolist() == [a == e1 for a in range(8)]
     assert sol.q_values[p.model.row_index[s2, w2]] == pytest.approx(0.49, abs=1e-12)
     assert sol.q_values[p.model.row_index[s2, w1]] == pytest.approx(0.0, abs=1e-12)
-    assert not p.satisfying(0.75).states[s0]
+    assert not satisfying(p, 0.75).states[s0]
     # the nonviolating sub-model forbids both hops from 0 (each may enter the hazard)
-    assert not p.nonviolating().states[s0]
+    assert not nonviolating(p).states[s0]
 
 
 def two_loops():
@@ -114,21 +147,21 @@ def test_mec_choice_prefers_sure_reach_then_reward():
     m = two_loops()
     w = np.array([0.0, 1.0, 3.0, 5.0, 0.0])
     p = ProductIMDP(m, trivial_automaton(), reward=w)
-    mecs = p.accepting_end_components()
+    mecs = accepting_end_components(p)
     assert sorted(ec.states.tolist() for ec in mecs) == [[1, 2], [3], [4]]
     cands = [ec for ec in mecs if 4 not in ec.states]
-    choice = p.choose_mec(cands)
+    choice = choose_mec(p, cands)
     assert choice.component.states.tolist() == [1, 2]
     assert choice.probability == 1.0 and choice.average_reward == 2.0
-    strat = p.steer_strategy(choice.component)
+    strat = steer_strategy(p, choice.component)
     assert strat[0] == 0
     # from s3 only R is reachable; among the unreachable-for-sure ones keep the best value
-    choice3 = p.choose_mec(cands, state=3)
+    choice3 = choose_mec(p, cands, state=3)
     assert choice3.component.states.tolist() == [3]
     # without the sure loop: the best worst-case probability (0.5) wins over the sink
     sink = next(ec for ec in mecs if 4 in ec.states)
     right = next(ec for ec in mecs if 3 in ec.states)
-    c2 = p.choose_mec([sink, right], state=0)
+    c2 = choose_mec(p, [sink, right], state=0)
     assert c2.component is right and c2.probability == pytest.approx(0.5)
 
 
@@ -139,7 +172,7 @@ def test_product_errors():
     with pytest.raises(ProductError, match="reward"):
         ProductIMDP(m, trivial_automaton(), reward=np.zeros(3))
     with pytest.raises(ProductError, match="no candidate"):
-        ProductIMDP(m, trivial_automaton()).choose_mec([])
+        choose_mec(ProductIMDP(m, trivial_automaton()), [])
 
 
 def test_a_product_beyond_the_size_limits_is_refused_before_it_is_built(monkeypatch):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from planner.imdp import IMDP
+from planner.imdp.analysis import accepting_states, satisfaction
 from planner.imdp.grid import GridWorld
 from planner.imdp.product import ProductIMDP
 from planner.ltl.translate import translate
@@ -19,7 +20,7 @@ rabin = importlib.import_module("planner.imdp.rabin")
 def value(model: IMDP, formula: str) -> float:
     aut = translate(formula, [p for p in model.propositions if p in formula])
     prod = ProductIMDP(model, aut)
-    sol = prod.satisfaction()
+    sol = satisfaction(prod)
     assert sol.converged and sol.error < 1e-8
     return float(sol.values[prod.initial])
 
@@ -68,8 +69,8 @@ def test_staying_outside_the_winning_region_counts():
 def test_until_formula_unchanged_on_a_corridor():
     g = GridWorld(5, 1, labels=[(), ("Haz",), (), (), ("Goal",)])
     prod = ProductIMDP(g.imdp_from_intervals(*corridor_intervals(g, 0.2)), until_automaton())
-    sol = prod.satisfaction()
-    acc = prod.accepting_states()
+    sol = satisfaction(prod)
+    acc = accepting_states(prod)
     from planner.imdp import Problem, ReachAvoid, Specification, solve
 
     old = solve(Problem(prod.model, Specification(ReachAvoid(acc))))
@@ -161,7 +162,7 @@ def test_game_value_matches_brute_force(formula):
     for m, aut, prod_ref in _checked(rng, formula, 4):
         _, _, per_state = ref.game_value(prod_ref)
         prod = ProductIMDP(m, aut)
-        sol = prod.satisfaction()
+        sol = satisfaction(prod)
         assert sol.converged
         idx = [prod.state_index(s, q) for s, q in prod_ref.states]
         assert sol.values[idx] == pytest.approx(per_state, abs=1e-7)
@@ -190,7 +191,7 @@ def test_strategy_improvement_from_scratch(formula, monkeypatch):
         monkeypatch.setattr(rabin, "almost_sure_region", first_empty)
         _, _, per_state = ref.game_value(prod_ref)
         prod = ProductIMDP(m, aut)
-        sol = prod.satisfaction()
+        sol = satisfaction(prod)
         monkeypatch.setattr(rabin, "almost_sure_region", real)
         idx = [prod.state_index(s, q) for s, q in prod_ref.states]
         assert sol.values[idx] == pytest.approx(per_state, abs=1e-7)
@@ -203,7 +204,7 @@ def test_between_sampled_resolutions(formula):
     rng = np.random.default_rng(7)
     for m, aut, prod_ref in _checked(rng, formula, 3, n=3, max_states=14):
         prod = ProductIMDP(m, aut)
-        got = float(prod.satisfaction().values[prod.initial])
+        got = float(satisfaction(prod).values[prod.initial])
         for _ in range(5):
             dist, sigma = ref.sample_resolution(prod_ref, m, aut, rng)
             assert got <= ref.mdp_satisfaction(prod_ref, dist) + 1e-7
