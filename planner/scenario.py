@@ -42,7 +42,7 @@ Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case stud
     [rewards]                       # per label, collected on landing
     A = 20.0
 
-    [runner]                        # all optional; defaults in RunnerParams
+    [runner]                        # all optional; see RunnerParams
     batch_size = 50
 """
 
@@ -62,6 +62,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.config import RunConfig
 from planner.errors import (
     LTLSyntaxError,
     MissingKeyError,
@@ -78,6 +79,8 @@ from planner.errors import (
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
+from planner.policy import SwitchingSettings
+from planner.qlearning import QLearningSettings
 from planner.textfile import read_text
 from planner.toml_lines import key_lines, line_of, nesting_depth
 
@@ -226,7 +229,10 @@ class Region:
 
 @dataclass(frozen=True)
 class RunnerParams:
-    """Settings of the navigation runner (the paper's symbols in brackets).
+    """The scenario's ``[runner]`` table (the paper's symbols in brackets).
+
+    Each key maps onto a key of the run's configuration tree (:data:`planner.config.RUNNER_KEYS`,
+    :class:`hopper_sim.config.RunnerSettings`), whose field holds the default.
 
     Attributes:
         batch_size: hops between two GP refits and re-syntheses.
@@ -242,15 +248,15 @@ class RunnerParams:
             :class:`planner.verdict.MissionMonitor`).
     """
 
-    batch_size: int = 50
-    max_steps: int = 500
-    p_rl_ee: float = 0.5
-    c: float = 0.5
-    eps: float = 0.005
-    discount: float = 0.95
-    runs: int = 1
-    seed: int = 0
-    window: int = 0
+    batch_size: int = RunConfig.batch_size
+    max_steps: int = RunConfig.max_steps
+    p_rl_ee: float = SwitchingSettings.p_rl_explore
+    c: float = SwitchingSettings.c
+    eps: float = SwitchingSettings.eps
+    discount: float = QLearningSettings.discount
+    runs: int = RunConfig.runs
+    seed: int = RunConfig.seed
+    window: int = RunConfig.window
 
     def __post_init__(self) -> None:
         checks: dict[str, tuple[Callable[[Any], bool], str]] = {
@@ -306,7 +312,7 @@ class Scenario:
     rewards: Mapping[str, float] = field(default_factory=dict)
     hazard: str = "Haz"
     goal: str = "Goal"
-    p_sat: float = 0.65
+    p_sat: float = SwitchingSettings.p_sat
     reward_known: bool = True
     collect: str = "once"
     runner: RunnerParams = field(default_factory=RunnerParams)
@@ -702,7 +708,7 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
         rewards=rewards,
         hazard=r.scalar(data, "hazard", "hazard", "str", "Haz"),
         goal=r.scalar(data, "goal", "goal", "str", "Goal"),
-        p_sat=r.scalar(data, "p_sat", "p_sat", "float", 0.65),
+        p_sat=r.scalar(data, "p_sat", "p_sat", "float", Scenario.p_sat),
         reward_known=r.scalar(data, "reward_known", "reward_known", "bool", True),
         collect=r.scalar(data, "collect", "collect", "str", "once"),
         runner=runner,

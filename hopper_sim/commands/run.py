@@ -16,7 +16,15 @@ import json
 import sys
 from pathlib import Path
 
-from hopnav.arguments import figure_file, input_file, non_negative_int, output_file, positive_int
+from hopnav.arguments import (
+    add_set_argument,
+    figure_file,
+    input_file,
+    non_negative_int,
+    output_file,
+    positive_int,
+    run_config,
+)
 from hopnav.errors import RunFailed, UsageError
 from hopnav.kernels import prepare_kernels
 
@@ -34,15 +42,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--explore-to",
         choices=("nonviolating", "accepting"),
-        default="nonviolating",
-        help="end components exploration steers to (see RunnerSettings.candidates)",
+        help="end components exploration steers to (planner.candidates) [nonviolating]",
     )
     p.add_argument(
         "--tour",
         choices=("reward", "coverage"),
-        default="reward",
-        help="exploration inside the chosen component (see RunnerSettings.tour)",
+        help="exploration inside the chosen component (planner.tour) [reward]",
     )
+    add_set_argument(p)
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
     p.add_argument(
         "--png", help="figure of the last run, .png/.svg/.pdf (default: runs/<scenario>.png)"
@@ -251,6 +258,14 @@ def run(args: argparse.Namespace) -> int:
         sc = load_scenario(args.scenario)
     except PlannerError as err:
         raise UsageError(str(err)) from None
+    flags = {
+        "run.max_steps": ("--max-steps", args.max_steps),
+        "run.runs": ("--runs", args.runs),
+        "run.seed": ("--seed", args.seed),
+        "planner.candidates": ("--explore-to", args.explore_to),
+        "planner.tour": ("--tour", args.tour),
+    }
+    settings = run_config(sc, args.set, flags)
     stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
     rrd = None if args.no_rrd else output_file(args.rrd or f"runs/{stem}.rrd", "--rrd", (".rrd",))
     png = None if args.no_png else figure_file(args.png or f"runs/{stem}.png", "--png")
@@ -274,13 +289,11 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.events import Observers
     from hopper_sim.figures import FigureWriter
     from hopper_sim.recording import RerunRecorder
-    from hopper_sim.runner import NavigationRunner, RunnerSettings
+    from hopper_sim.runner import NavigationRunner
 
     model, controller = _controller(ckpt_path)
-    if args.max_steps is not None:
-        sc = sc.with_runner(max_steps=args.max_steps)
-    n_runs = sc.runner.runs if args.runs is None else args.runs
-    settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
+    sc = settings.apply_to(sc)
+    n_runs = sc.runner.runs
     env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
     try:
         runner = NavigationRunner(sc, env=env, settings=settings, learner=learner)
@@ -304,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
         observers.append(writer)
     runner.observer = fan = Observers(observers)
     files = {"rrd": None if rrd is None else str(rrd), "png": None if png is None else str(png)}
-    seed = sc.runner.seed if args.seed is None else args.seed
+    seed = sc.runner.seed
     failure: str | None = None
     try:
         runner.run_many(n_runs, seed)
