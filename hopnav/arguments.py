@@ -195,9 +195,15 @@ def add_set_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run_config(scenario: Any, items: Sequence[str], flags: Mapping[str, tuple[str, Any]]) -> Any:
-    """The configuration tree of a run: ``scenario``'s, then the given ``flags`` (tree key ->
-    (option, value or ``None`` where not given)), then the ``--set`` ``items``.
+def run_config(
+    scenario: Any,
+    items: Sequence[str],
+    flags: Mapping[str, tuple[str, Any]],
+    base: Any = None,
+) -> Any:
+    """The configuration tree of a run: ``scenario``'s (``None``: ``base``, the shipped
+    defaults), then the given ``flags`` (tree key -> (option, value or ``None`` where not
+    given)), then the ``--set`` ``items``.
 
     Raises:
         UsageError: a malformed, unknown or ambiguous key, a wrong type or a value out of
@@ -206,7 +212,10 @@ def run_config(scenario: Any, items: Sequence[str], flags: Mapping[str, tuple[st
     from hopper_sim.config import ConfigError, RunnerSettings, parse_assignments, resolve_key
 
     try:
-        config = RunnerSettings.from_scenario(scenario)
+        if scenario is None:
+            config = RunnerSettings() if base is None else base
+        else:
+            config = RunnerSettings.from_scenario(scenario, base)
         given = {key: v for key, (_, v) in flags.items() if v is not None}
         for key, value in given.items():
             config = config.override({key: value}, source=flags[key][0])

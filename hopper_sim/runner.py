@@ -82,7 +82,8 @@ class NavigationRunner:
 
     Args:
         scenario: the world and tasks.
-        env: the environment (default: built from ``scenario`` and ``settings.env``).
+        env: the environment (default: built from ``scenario`` and ``settings.env``; a given
+            one must have ``settings.env``, and its settings are the default's ``env``).
         settings: the run's configuration tree, complete (default:
             ``RunnerSettings.from_scenario(scenario)``, the shipped defaults with the
             scenario's ``[runner]`` table and ``p_sat``). Its ``run`` section and
@@ -104,7 +105,14 @@ class NavigationRunner:
         learner: RobustQLearner | None = None,
         clock: Callable[[], float] = time.perf_counter,
     ) -> None:
-        self.settings = settings or RunnerSettings.from_scenario(scenario)
+        if settings is None:
+            base = None if env is None else RunnerSettings(env=env.settings)
+            settings = RunnerSettings.from_scenario(scenario, base)
+        elif env is not None and env.settings != settings.env:
+            raise ValueError(
+                f"the environment's settings {env.settings} differ from settings.env {settings.env}"
+            )
+        self.settings = settings
         # the scenario as run: its [runner] table and p_sat are the tree's
         self.scenario = scenario = self.settings.apply_to(scenario)
         self.env = env or HopperGridEnv(scenario, settings=self.settings.env)
