@@ -18,6 +18,7 @@ from hopper_sim.config import (
     ConfigError,
     RunnerSettings,
     default_config,
+    describe,
     parse_assignments,
     resolve_key,
 )
@@ -391,7 +392,7 @@ def test_toml_runner_errors_name_the_key_line_and_file(tmp_path):
 
 def test_a_given_environment_must_match_the_settings(scenario_c, env_c):
     settings = RunnerSettings.from_scenario(scenario_c).override({"env.thrust": False})
-    with pytest.raises(ValueError, match="settings.env"):
+    with pytest.raises(ValueError, match=r"settings\.env"):
         NavigationRunner(scenario_c, env=env_c, settings=settings)
 
 
@@ -411,3 +412,62 @@ def test_settings_pickle_and_run_single_takes_overrides(scenario_c, monkeypatch)
     assert seen["settings"].planner.delta == 0.05
     assert seen["settings"].run.runs == 10  # the scenario's table is kept
     assert np.isclose(seen["settings"].planner.q_learning.discount, 0.95)
+
+
+def test_readme_lists_the_keys_with_their_defaults():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = text.split("| keys | defaults | what |")[1].split("\n\n")[0]
+    listed: dict[str, str] = {}
+    for row in table.strip().splitlines()[1:]:
+        keys_cell, defaults_cell = row.split(" | ")[:2]
+        keys = [k.strip(" `|") for k in keys_cell.split(",")]
+        defaults = [d.strip() for d in defaults_cell.split(",")]
+        if keys[-1] == "...":
+            assert defaults == ["(prior)"]
+            keys, defaults = keys[:-1], defaults * (len(keys) - 1)
+        prefix = keys[0].rpartition(".")[0]
+        keys = [f"{prefix}{k}" if k.startswith(".") else k for k in keys]
+        assert len(keys) == len(defaults), row
+        listed.update(zip(keys, defaults, strict=True))
+    shown = dict(describe(default_config()))
+    for key, value in listed.items():
+        assert key in shown, key
+        if key.startswith("gp."):
+            assert shown[key] == value, key
+        else:
+            assert str(default_config().leaves()[key]).lower() in (value, value + ".0") or float(
+                value
+            ) == float(shown[key]), key
+    assert {k for k in shown if not k.startswith("gp.")} <= set(listed)
+
+
+def test_hopnav_config_prints_the_tree(capsys):
+    from hopnav.cli import main
+
+    assert main(["config", "--scenario", "c", "--set", "switching.c=0.7"]) == 0
+    lines = dict(
+        (k.strip(), v.strip())
+        for k, v in (x.split("=") for x in capsys.readouterr().out.splitlines())
+    )
+    assert lines["planner.switching.c"] == "0.7" and lines["run.runs"] == "10"
+    assert set(lines) == set(default_config().leaves())
+
+
+def test_hopnav_run_set_reaches_the_runner(tmp_path, monkeypatch):
+    from hopnav.cli import main
+
+    seen = {}
+
+    def spy(self, runs=None, seed=None):
+        seen.update(
+            settings=self.settings, runs=runs, seed=seed, max_steps=self.scenario.runner.max_steps
+        )
+        return []
+
+    monkeypatch.setattr(NavigationRunner, "run_many", spy)
+    argv = ["run", "--no-rrd", "--no-png", "--quiet", "--max-steps", "7", "--seed", "3"]
+    argv += ["--set", "switching.c=0.8", "--set", "planner.beta=2.5", "--set", "gp.bias_std=0.3"]
+    assert main(argv) == 0
+    s = seen["settings"]
+    assert s.planner.switching.c == 0.8 and s.planner.beta == 2.5 and s.gp == {"bias_std": 0.3}
+    assert (seen["runs"], seen["seed"], seen["max_steps"]) == (1, 3, 7)
