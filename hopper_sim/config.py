@@ -3,13 +3,13 @@
 :class:`RunnerSettings` is the root; its sections are the dataclasses of the code that uses
 them, each default defined once, in its field::
 
-    run       planner.config.RunConfig              batch size, hop cap, runs, seed, window
-    planner   planner.learning.ResynthesisSettings  abstraction, synthesis, exploration
-      planner.switching   planner.policy.SwitchingSettings    P_RL,ee, C, eps, P_sat
-      planner.q_learning  planner.qlearning.QLearningSettings  gamma, alpha, epsilon, prior
-    env       hopper_sim.environment.EnvSettings    terrain, noise, thrust switches
-    gp        planner.gp.FitSettings fields          changes to the scene-derived GP prior
-    map_resolution, torch_threads                   the runner's own
+    run                 planner.config.RunConfig             schedule: batch, cap, runs, seed
+    planner             planner.config.ResynthesisSettings   abstraction and synthesis
+    planner.switching   planner.policy.SwitchingSettings     P_RL,ee, C, eps, P_sat
+    planner.q_learning  planner.qlearning.QLearningSettings  gamma, alpha, epsilon, prior
+    env                 hopper_sim.environment.EnvSettings   terrain, noise, thrust switches
+    gp                  planner.gp.FitSettings fields        changes to the derived GP prior
+    map_resolution, torch_threads                            the runner's own
 
 A key is the dotted path of a leaf (``planner.switching.c``); any unique dotted tail of it is
 accepted too (``switching.c``, ``c``). Build a tree with :func:`default_config` or from a

@@ -44,17 +44,17 @@ worst-case satisfaction probabilities, the tour and the RL actor, ready for
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from planner.automaton import RabinAutomaton
-from planner.errors import IntervalError, PolicyError
+from planner.config import CANDIDATES as CANDIDATES  # re-exported (defined there)
+from planner.config import ResynthesisSettings
+from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
 from planner.imdp import IMDP, Problem, ReachAvoid, Solution, Specification, graph, solve
 from planner.imdp.graph import SubModel
@@ -64,19 +64,12 @@ from planner.imdp.product import MecChoice, ProductIMDP
 from planner.intervals import (
     CellErrorBounds,
     TransitionIntervals,
-    TruncatedGaussianNoise,
     cell_error_bounds,
     transition_intervals,
 )
-from planner.policy import PhasePlan, RLActor, SwitchingSettings
-from planner.qlearning import (
-    GreedyQ,
-    QLearningSettings,
-    QSolution,
-    RobustQLearner,
-    robust_q_iteration,
-)
-from planner.tour import TOUR_MODES, ComponentTour
+from planner.policy import PhasePlan, RLActor
+from planner.qlearning import GreedyQ, QSolution, RobustQLearner, robust_q_iteration
+from planner.tour import ComponentTour
 
 
 def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> np.ndarray:
@@ -107,89 +100,6 @@ def frontier_strategy(model: IMDP, target: np.ndarray, allowed: np.ndarray) -> n
     idx = np.flatnonzero(is_best)[::-1]  # reversed: the lowest row index is written last
     first[model.row_state[idx]] = model.row_action[idx]
     return first
-
-
-CANDIDATES: tuple[str, ...] = ("nonviolating", "accepting")
-"""The exploration targets of :class:`ResynthesisSettings` (``candidates``)."""
-
-
-@dataclass(frozen=True)
-class ResynthesisSettings:
-    """Settings of :func:`resynthesise` and of the plans it makes (the planner's part of the
-    run's configuration tree, :class:`hopper_sim.config.RunnerSettings`).
-
-    ``samples_per_axis``: sample points per cell and axis for the per-(cell, action) error
-    bounds; ``delta``, ``horizon`` and ``beta``: see :mod:`planner.intervals` (``beta=None``
-    takes the union-bound multiplier for ``delta`` over ``horizon`` hops; a ``beta`` is an
-    override for studies of the guarantee, not a calibrated value); ``noise`` is the known
-    landing noise nu, which must be the one of the GP's prior; ``q_tolerance``: the
-    convergence tolerance of the robust Q-iteration.
-
-    ``candidates``: the end components the exploration steers to: ``"nonviolating"``
-    (default: the pessimistic MECs of the nonviolating sub-model, as the paper defines
-    exploration) or ``"accepting"`` (the goal-directed variant: the robustly accepting ones,
-    falling back to the nonviolating MECs if there are none). ``tour``: the in-component
-    tour's mode (:data:`planner.tour.TOUR_MODES`): ``"reward"`` (default) heads for the
-    component's cells of highest reward still to be collected, then tours the rest;
-    ``"coverage"`` only tours (least recently visited, least known cells first), leaving the
-    reward to the RL action.
-
-    ``switching``: the settings of the :class:`~planner.policy.SwitchingPolicy` that acts on
-    these plans; its ``p_sat`` is also the threshold of the satisfying sub-model
-    (:attr:`p_sat`), so build the policy with ``SwitchingPolicy(settings.switching)``.
-    ``q_learning``: the reward's Q-learning settings; its ``discount`` is also that of the
-    known reward's robust Q-iteration (:attr:`discount`), so build a learner with
-    ``RobustQLearner(..., settings=settings.q_learning)``.
-    """
-
-    samples_per_axis: int = 5
-    delta: float = 0.01
-    horizon: int = 100
-    beta: float | None = None
-    noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
-    q_tolerance: float = 1e-6
-    candidates: str = "nonviolating"
-    tour: str = "reward"
-    switching: SwitchingSettings = field(default_factory=SwitchingSettings)
-    q_learning: QLearningSettings = field(default_factory=QLearningSettings)
-
-    def __post_init__(self) -> None:
-        if self.candidates not in CANDIDATES:
-            raise PolicyError(
-                f"candidates must be 'nonviolating' or 'accepting', got {self.candidates!r}"
-            )
-        if self.tour not in TOUR_MODES:
-            raise PolicyError(f"tour must be one of {TOUR_MODES}, got {self.tour!r}")
-        for name in ("samples_per_axis", "horizon"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise IntervalError(f"{name} must be a whole number >= 1, got {value!r}")
-        if not 0.0 < self.delta < 1.0:
-            raise IntervalError(f"delta must lie in (0, 1), got {self.delta}")
-        if self.beta is not None and not (math.isfinite(self.beta) and self.beta >= 0.0):
-            raise IntervalError(f"beta must be finite and >= 0, got {self.beta}")
-        if not (math.isfinite(self.q_tolerance) and self.q_tolerance > 0.0):
-            raise PolicyError(f"q_tolerance must be finite and > 0, got {self.q_tolerance}")
-
-    @property
-    def p_sat(self) -> float:
-        """``P_sat`` (of :attr:`switching`): the satisfying sub-model keeps the states and
-        actions whose worst-case satisfaction probability exceeds it."""
-        return self.switching.p_sat
-
-    @property
-    def discount(self) -> float:
-        """``gamma`` (of :attr:`q_learning`) of the reward's robust Q-iteration."""
-        return self.q_learning.discount
-
-    def interval_options(self) -> dict[str, Any]:
-        """The keyword arguments of :func:`~planner.intervals.cell_error_bounds`."""
-        return {
-            "samples_per_axis": self.samples_per_axis,
-            "delta": self.delta,
-            "horizon": self.horizon,
-            "beta": self.beta,
-        }
 
 
 @dataclass(frozen=True)
