@@ -250,6 +250,18 @@ def _report(args, sc, ends, files: dict, prov: dict) -> None:
             print(f"{key}: {path}")
 
 
+def _settings(args: argparse.Namespace, sc):
+    """The run's configuration tree: the scenario's, the flags, then ``--set``."""
+    flags = {
+        "run.max_steps": ("--max-steps", args.max_steps),
+        "run.runs": ("--runs", args.runs),
+        "run.seed": ("--seed", args.seed),
+        "planner.candidates": ("--explore-to", args.explore_to),
+        "planner.tour": ("--tour", args.tour),
+    }
+    return run_config(sc, args.set, flags)
+
+
 def run(args: argparse.Namespace) -> int:
     from planner.errors import PlannerError
     from planner.scenario import load_scenario
@@ -258,14 +270,7 @@ def run(args: argparse.Namespace) -> int:
         sc = load_scenario(args.scenario)
     except PlannerError as err:
         raise UsageError(str(err)) from None
-    flags = {
-        "run.max_steps": ("--max-steps", args.max_steps),
-        "run.runs": ("--runs", args.runs),
-        "run.seed": ("--seed", args.seed),
-        "planner.candidates": ("--explore-to", args.explore_to),
-        "planner.tour": ("--tour", args.tour),
-    }
-    settings = run_config(sc, args.set, flags)
+    settings = _settings(args, sc)
     stem = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
     rrd = None if args.no_rrd else output_file(args.rrd or f"runs/{stem}.rrd", "--rrd", (".rrd",))
     png = None if args.no_png else figure_file(args.png or f"runs/{stem}.png", "--png")
