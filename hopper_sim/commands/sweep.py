@@ -129,6 +129,8 @@ def _sets(scenario: Any, items: list[str]) -> dict[str, str]:
     Raises:
         UsageError: a malformed or unknown key, a bad value, or a key the sweep sets.
     """
+    if not items:
+        return {}  # (and the tree's modules stay unimported until the runs start)
     from hopper_sim.config import ConfigError, RunnerSettings, parse_assignments, resolve_key
 
     try:
