@@ -92,9 +92,7 @@ def main() -> None:
     for n in [0, *args.hops]:
         gp = LandingErrorGP(gp_settings)
         gp.fit(positions[:n].reshape(-1, 2), errors[:n].reshape(-1, 2), actions[:n])
-        bounds = cell_error_bounds(
-            gp, grid, samples_per_axis=settings.samples_per_axis, delta=settings.delta
-        )
+        bounds = cell_error_bounds(gp, grid, **settings.interval_options())
         t0 = time.perf_counter()
         ti = transition_intervals(bounds, grid, settings.noise)
         model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])

@@ -51,10 +51,11 @@ class _Cells(Observer):
         self.cells[-1].append(int(event.cell))
 
 
-def _settings(beta: float | None, tour: str | None) -> RunnerSettings:
-    if tour is None:
-        return RunnerSettings(beta=beta)
-    return RunnerSettings(beta=beta, tour=tour)
+def _settings(sc, beta: float | None, tour: str | None) -> RunnerSettings:
+    changes: dict = {"planner.beta": beta}
+    if tour is not None:
+        changes["planner.tour"] = tour
+    return RunnerSettings.from_scenario(sc).override(changes)
 
 
 def _sequence(job: tuple) -> tuple[str, int, list[RunEnd], list[list[int]]]:
@@ -62,7 +63,7 @@ def _sequence(job: tuple) -> tuple[str, int, list[RunEnd], list[list[int]]]:
     name, seed, runs, beta, tour = job
     sc = load_scenario(name)
     cells = _Cells()
-    runner = NavigationRunner(sc, settings=_settings(beta, tour), observer=cells)
+    runner = NavigationRunner(sc, settings=_settings(sc, beta, tour), observer=cells)
     ends = runner.run_many(runs, seed)
     return name, seed, ends, cells.cells
 

@@ -30,7 +30,7 @@ from planner.imdp.grid import ACTION_OFFSETS, GridWorld
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import ResynthesisSettings, resynthesise
 from planner.ltl.translate import translate
-from planner.policy import SwitchingPolicy, SwitchingSettings
+from planner.policy import SwitchingPolicy
 from planner.scenario import load_scenario
 
 BUDGET_S = 1.0
@@ -72,7 +72,7 @@ def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
     noise = TruncatedGaussianNoise()
     gp.reset()
     settings = ResynthesisSettings(beta=args.beta, candidates=args.candidates)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.5, c=0.5, eps=0.005))
+    policy = SwitchingPolicy(settings.switching)
     pos, err, acts = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int)
     cell = start
     xy = grid.centres()[cell]

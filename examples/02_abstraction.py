@@ -17,6 +17,7 @@ from planner import (
     GridWorld,
     LandingErrorGP,
     ProductIMDP,
+    ResynthesisSettings,
     TruncatedGaussianNoise,
     cell_error_bounds,
     load_scenario,
@@ -27,7 +28,7 @@ from planner import (
 
 
 def product_of(scenario, grid, gp, noise):
-    bounds = cell_error_bounds(gp, grid)
+    bounds = cell_error_bounds(gp, grid, **ResynthesisSettings().interval_options())
     intervals = transition_intervals(bounds, grid, noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[scenario.start_cell])
     return ProductIMDP(model, translate(scenario.formula), scenario.state_rewards), intervals

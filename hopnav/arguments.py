@@ -13,8 +13,9 @@ import argparse
 import math
 import os
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from hopnav.errors import UsageError
 
@@ -179,3 +180,50 @@ def input_file(path: str | os.PathLike[str], what: str) -> Path:
     if not os.access(target, os.R_OK):
         raise UsageError(f"{what} {target}: cannot be read")
     return target
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """The repeatable ``--set KEY=VALUE`` of the commands that run the navigation loop."""
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a setting of the run's configuration tree, e.g. --set switching.c=0.75 "
+        "(repeatable; after the scenario's [runner] table and p_sat; `hopnav config` lists "
+        "the keys and defaults)",
+    )
+
+
+def run_config(
+    scenario: Any,
+    items: Sequence[str],
+    flags: Mapping[str, tuple[str, Any]],
+    base: Any = None,
+) -> Any:
+    """The configuration tree of a run: ``scenario``'s (``None``: ``base``, the shipped
+    defaults), then the given ``flags`` (tree key -> (option, value or ``None`` where not
+    given)), then the ``--set`` ``items``.
+
+    Raises:
+        UsageError: a malformed, unknown or ambiguous key, a wrong type or a value out of
+            range (naming the option and the key), or a key set by a flag and ``--set``.
+    """
+    from hopper_sim.config import ConfigError, RunnerSettings, parse_assignments, resolve_key
+
+    try:
+        if scenario is None:
+            config = RunnerSettings() if base is None else base
+        else:
+            config = RunnerSettings.from_scenario(scenario, base)
+        given = {key: v for key, (_, v) in flags.items() if v is not None}
+        for key, value in given.items():
+            config = config.override({key: value}, source=flags[key][0])
+        sets = parse_assignments(items)
+        for key in sets:
+            full = resolve_key(key, "--set: ")
+            if full in given:
+                raise UsageError(f"--set {key}: {full} is also given by {flags[full][0]}")
+        return config.override(sets, text=True, source="--set")
+    except ConfigError as err:
+        raise UsageError(str(err)) from None

@@ -37,6 +37,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "hopper_sim.commands.sweep",
         "reproduce Table I: reward / steps over P_RL,ee = C x eps, with 95 %% CIs",
     ),
+    "config": (
+        "hopper_sim.commands.config",
+        "print a run's configuration tree (every --set key with its value)",
+    ),
     "scenario": (
         "hopper_sim.commands.scenario",
         "validate a scenario (shipped name a-d or a TOML path) and print its map",

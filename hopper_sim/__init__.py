@@ -48,7 +48,8 @@ _EXPORTS: dict[str, str] = {
     "HopperGridEnv": "hopper_sim.environment",
     "EnvSettings": "hopper_sim.environment",
     "NavigationRunner": "hopper_sim.runner",
-    "RunnerSettings": "hopper_sim.runner",
+    "RunnerSettings": "hopper_sim.config",
+    "default_config": "hopper_sim.config",
     "run_single": "hopper_sim.runner",
     # events and observers
     "Observer": "hopper_sim.events",

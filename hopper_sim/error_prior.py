@@ -43,6 +43,7 @@ import numpy as np
 from hopper_sim.batch import simulate_hops
 from hopper_sim.controller import LegAngleController
 from hopper_sim.controller.simulator import nominal_energy
+from hopper_sim.environment import EnvSettings
 from hopper_sim.hop import simulate_hop
 from hopper_sim.model import HopperModel
 from planner._util.atomic import atomic_write
@@ -281,7 +282,7 @@ def error_prior(
     model: HopperModel,
     controller: LegAngleController,
     *,
-    terrain: bool = True,
+    terrain: bool = EnvSettings.terrain,
     cell: float = 1.0,
     **overrides: object,
 ) -> FitSettings:

@@ -54,11 +54,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from hopper_sim.environment import EnvSettings, HopperGridEnv
+from hopper_sim.config import RunnerSettings
+from hopper_sim.environment import HopperGridEnv
 from hopper_sim.episode import Episode, RunClock, hop_outcome
 from hopper_sim.error_prior import error_prior
 from hopper_sim.events import (
@@ -70,71 +71,36 @@ from hopper_sim.events import (
     SynthesisEvent,
 )
 from planner._util.torch_threads import torch_threads
-from planner.gp.landing import FitSettings, LandingErrorGP
+from planner.gp.landing import LandingErrorGP
 from planner.imdp.analysis import accepting_states
 from planner.imdp.grid import ACTIONS
 from planner.imdp.product import check_product_size
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import Resynthesis, ResynthesisSettings, replan_reward, resynthesise
+from planner.learning import Resynthesis, replan_reward, resynthesise
 from planner.ltl.translate import translate
 from planner.modes import Outcome
-from planner.policy import Decision, SwitchingPolicy, SwitchingSettings
-from planner.qlearning import QLearningSettings, RobustQLearner
+from planner.policy import Decision, SwitchingPolicy
+from planner.qlearning import RobustQLearner
 from planner.scenario import Scenario
 from planner.verdict import AutomatonVerdicts, MissionMonitor, describe
-
-
-@dataclass(frozen=True)
-class RunnerSettings:
-    """Settings of the loop that the scenario does not hold.
-
-    Attributes:
-        env: physics switches (terrain, noise, thrust, terrain seed, CoM paths).
-        delta: the interval confidence parameter (a run of up to 100 hops after the switch
-            keeps its hops' errors inside their intervals with probability >= 1 - delta under
-            the landing-error model, see :mod:`planner.intervals`).
-        beta: the interval multiplier instead of the one ``delta`` gives (``None``: from
-            ``delta``); an override for studies of the guarantee, not a calibrated value.
-        samples_per_axis: sample points per cell and axis for the per-cell error bounds.
-        gp: the landing-error model's prior (default: derived from the scene and the
-            controller, :func:`hopper_sim.error_prior.error_prior`).
-        map_resolution: GP map points per cell and axis in :class:`SynthesisEvent`.
-        q_learning: online Q-learning settings for an unknown reward (its discount is the
-            scenario's).
-        candidates: the end components exploration steers to: ``"nonviolating"`` (default,
-            the paper's exploration): the optimal MEC of the nonviolating sub-model, toured
-            until the guarantee exceeds P_sat; ``"accepting"`` (the goal-directed variant):
-            the robustly accepting ones, so exploration heads for the goal while the RL
-            action collects reward (runs then often reach the goal before any refit).
-        tour: the in-component tour's mode: ``"reward"`` (default: the component's
-            rewarding cells first, then the rest) or ``"coverage"`` (least recently visited,
-            least known cells first; the reward is left to the RL action), see
-            :mod:`planner.tour`.
-        torch_threads: torch intra-op threads during a run (the controller's and the GPs'
-            small batches run fastest on one thread; restored after the run).
-    """
-
-    env: EnvSettings = field(default_factory=EnvSettings)
-    delta: float = 0.01
-    beta: float | None = None
-    samples_per_axis: int = 5
-    gp: FitSettings | None = None
-    map_resolution: int = 2
-    q_learning: QLearningSettings | None = None
-    candidates: str = "nonviolating"
-    tour: str = "reward"
-    torch_threads: int = 1
 
 
 class NavigationRunner:
     """Runs navigation episodes of a scenario (see the module docstring).
 
     Args:
-        scenario: the world, tasks and runner parameters.
-        env: the environment (default: built from ``scenario`` and ``settings.env``).
-        settings: loop settings.
+        scenario: the world and tasks.
+        env: the environment (default: built from ``scenario`` and ``settings.env``; a given
+            one must have ``settings.env``, and its settings are the default's ``env``).
+        settings: the run's configuration tree, complete (default:
+            ``RunnerSettings.from_scenario(scenario)``, the shipped defaults with the
+            scenario's ``[runner]`` table and ``p_sat``). Its ``run`` section and
+            ``planner.switching.p_sat`` replace the scenario's ``[runner]`` table and ``p_sat``
+            (:attr:`scenario` is the scenario as run), so build it from the scenario and
+            ``override`` it to keep them.
         observer: receives every event (default: none).
-        learner: an existing Q-learner to continue (unknown reward; default: a fresh one).
+        learner: an existing Q-learner to continue (unknown reward; default: a fresh one);
+            it continues with ``settings.planner.q_learning``.
     """
 
     def __init__(
@@ -147,8 +113,16 @@ class NavigationRunner:
         learner: RobustQLearner | None = None,
         clock: Callable[[], float] = time.perf_counter,
     ) -> None:
-        self.scenario = scenario
-        self.settings = settings or RunnerSettings()
+        if settings is None:
+            base = None if env is None else RunnerSettings(env=env.settings)
+            settings = RunnerSettings.from_scenario(scenario, base)
+        elif env is not None and env.settings != settings.env:
+            raise ValueError(
+                f"the environment's settings {env.settings} differ from settings.env {settings.env}"
+            )
+        self.settings = settings
+        # the scenario as run: its [runner] table and p_sat are the tree's
+        self.scenario = scenario = self.settings.apply_to(scenario)
         self.env = env or HopperGridEnv(scenario, settings=self.settings.env)
         self.observer = observer or Observer()
         self.clock = clock
@@ -156,20 +130,10 @@ class NavigationRunner:
         self.automaton = translate(scenario.formula)
         self.verdicts = AutomatonVerdicts(self.automaton, excluded=scenario.hazard)
         pp = self.env.model.perturbation
-        rp = scenario.runner
-        self.synthesis_settings = ResynthesisSettings(
-            samples_per_axis=self.settings.samples_per_axis,
-            delta=self.settings.delta,
-            beta=self.settings.beta,
-            noise=TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
-            p_sat=scenario.p_sat,
-            discount=rp.discount,
-            candidates=self.settings.candidates,
-            tour=self.settings.tour,
-        )
-        self.switching = SwitchingSettings(
-            p_rl_explore=rp.p_rl_ee, c=rp.c, eps=rp.eps, p_sat=scenario.p_sat
-        )
+        noise = TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound)
+        self.synthesis_settings = replace(self.settings.planner, noise=noise)
+        self.switching = self.synthesis_settings.switching
+        q_settings = self.synthesis_settings.q_learning
         nq = self.automaton.n_states
         n_product = self.grid.n_states * nq
         # before any hop: each enabled (cell, action) has a successor in every product
@@ -182,27 +146,23 @@ class NavigationRunner:
                     f"the Q-learner has {learner.n_states} states, this scenario's product "
                     f"{n_product}"
                 )
+            learner.settings = q_settings  # it continues with this run's settings
             self.learner = learner
         else:
-            qs = self.settings.q_learning or QLearningSettings()
             self.learner = RobustQLearner(
                 n_product,
                 len(ACTIONS),
                 self.grid.n_states,
                 state_cell=np.arange(n_product) // nq,
-                settings=QLearningSettings(
-                    discount=rp.discount,
-                    learning_rate=qs.learning_rate,
-                    epsilon=qs.epsilon,
-                    prior_reward=qs.prior_reward,
-                ),
+                settings=q_settings,
             )
-        self.gp_settings = self.settings.gp or error_prior(
+        prior = self.settings.gp_prior or error_prior(
             self.env.model,
             self.env.controller,
             terrain=self.env.settings.terrain,
             cell=scenario.world.cell,
         )
+        self.gp_settings = replace(prior, **self.settings.gp)
         res = self.settings.map_resolution
         w = scenario.world
         self.map_x = (np.arange(w.nx * res) + 0.5) * (w.cell / res)
@@ -432,7 +392,13 @@ class NavigationRunner:
         return [self.run(base + k, run_index=k) for k in range(n)]
 
 
-def run_single(scenario: Scenario, seed: int, run_index: int = 0) -> RunEnd:
-    """One run of ``scenario`` with default settings and no observer (picklable, for worker
-    processes)."""
-    return NavigationRunner(scenario).run(seed, run_index=run_index)
+def run_single(
+    scenario: Scenario, seed: int, run_index: int = 0, overrides: dict | None = None
+) -> RunEnd:
+    """One run of ``scenario`` with its settings (``overrides``: changes by key, as text,
+    :meth:`~hopper_sim.config.RunnerSettings.override`) and no observer (picklable, also
+    as a :func:`functools.partial`, for worker processes)."""
+    settings = RunnerSettings.from_scenario(scenario)
+    if overrides:
+        settings = settings.override(overrides, text=True, source="--set")
+    return NavigationRunner(scenario, settings=settings).run(seed, run_index=run_index)

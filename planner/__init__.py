@@ -62,7 +62,7 @@ _EXPORTS: dict[str, str] = {
     # synthesis, policies, learning
     "resynthesise": "planner.learning",
     "Resynthesis": "planner.learning",
-    "ResynthesisSettings": "planner.learning",
+    "ResynthesisSettings": "planner.config",
     "SwitchingPolicy": "planner.policy",
     "SwitchingSettings": "planner.policy",
     "RobustQLearner": "planner.qlearning",

@@ -170,14 +170,16 @@ def cell_error_bounds(
     predictor: ErrorPredictor,
     grid: GridWorld,
     *,
-    samples_per_axis: int = 3,
-    delta: float = 0.01,
-    horizon: int = 100,
+    samples_per_axis: int,
+    delta: float,
+    horizon: int,
     beta: float | None = None,
 ) -> CellErrorBounds:
     """Bounds of the mean landing error of every (cell, action) (see the module docstring).
 
-    ``beta`` overrides the union-bound multiplier computed from ``delta``. Raises
+    The settings' defaults are those of :class:`planner.config.ResynthesisSettings`
+    (``cell_error_bounds(gp, grid, **ResynthesisSettings().interval_options())``). ``beta``
+    overrides the union-bound multiplier computed from ``delta``. Raises
     :class:`~planner.errors.IntervalError` if the predictor returns arrays of the wrong shape,
     non-finite values or a negative std, variation or residual.
     """

@@ -28,11 +28,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from planner.automaton import RabinAutomaton
+from planner.config import CANDIDATES as CANDIDATES  # re-exported (defined there)
+from planner.config import ResynthesisSettings
 from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
 from planner.imdp import IMDP
@@ -41,54 +43,13 @@ from planner.imdp.product import ProductIMDP
 from planner.intervals import (
     CellErrorBounds,
     TransitionIntervals,
-    TruncatedGaussianNoise,
     cell_error_bounds,
     transition_intervals,
 )
-from planner.modes import Candidates
 from planner.policy import RLActor
 from planner.qlearning import QSolution, RobustQLearner
 from planner.synthesis import Synthesis, q_values, synthesise
-from planner.tour import TOUR_MODES, ComponentTour
-
-CANDIDATES: tuple[str, ...] = tuple(m.value for m in Candidates)
-"""The exploration targets of :class:`ResynthesisSettings` (``candidates``)."""
-
-
-@dataclass(frozen=True)
-class ResynthesisSettings:
-    """Settings of :func:`resynthesise` (see :mod:`planner.intervals` for ``delta`` and
-    ``beta``: ``beta=None`` takes the union-bound multiplier for ``delta``; ``noise`` is the
-    known landing noise nu, which must be the one of the GP's prior).
-
-    ``candidates``: the end components the exploration steers to: ``"nonviolating"``
-    (default: the pessimistic MECs of the nonviolating sub-model, as the paper defines
-    exploration) or ``"accepting"`` (the goal-directed variant: the robustly accepting ones,
-    falling back to the nonviolating MECs if there are none). ``tour``: the in-component
-    tour's mode (:data:`planner.tour.TOUR_MODES`): ``"reward"`` (default) heads for the
-    component's cells of highest reward still to be collected, then tours the rest;
-    ``"coverage"`` only tours (least recently visited, least known cells first), leaving the
-    reward to the RL action.
-    """
-
-    samples_per_axis: int = 3
-    delta: float = 0.01
-    horizon: int = 100
-    beta: float | None = None
-    noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
-    p_sat: float = 0.65
-    discount: float = 0.95
-    q_tolerance: float = 1e-6
-    candidates: str = "nonviolating"
-    tour: str = "reward"
-
-    def __post_init__(self) -> None:
-        if self.candidates not in CANDIDATES:
-            raise PolicyError(
-                f"candidates must be 'nonviolating' or 'accepting', got {self.candidates!r}"
-            )
-        if self.tour not in TOUR_MODES:
-            raise PolicyError(f"tour must be one of {TOUR_MODES}, got {self.tour!r}")
+from planner.tour import ComponentTour
 
 
 @dataclass(frozen=True)

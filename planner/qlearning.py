@@ -115,7 +115,7 @@ def robust_q_iteration(
     model: IMDP,
     reward: np.ndarray,
     *,
-    discount: float = 0.95,
+    discount: float,
     allowed: np.ndarray | None = None,
     initial: np.ndarray | None = None,
     tolerance: float = 1e-8,
@@ -128,7 +128,7 @@ def robust_q_iteration(
     Args:
         model: the interval MDP.
         reward: ``(n_states,)`` reward of landing in each state.
-        discount: ``gamma`` in ``[0, 1)``.
+        discount: ``gamma`` in ``[0, 1)`` (a run's: :attr:`QLearningSettings.discount`).
         allowed: ``(n_states, n_actions)`` mask of the actions ``V`` may maximise over
             (a sub-model); default all enabled actions.
         initial: ``(n_states, n_actions)`` Q-table to warm-start from (``nan`` ignored).

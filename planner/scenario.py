@@ -36,7 +36,10 @@ from planner.errors import (
     UndefinedLabelError,
     UnknownPropositionError,
 )
+from planner.config import RunConfig
 from planner.ltl.parser import check_propositions, parse
+from planner.policy import SwitchingSettings
+from planner.qlearning import QLearningSettings
 from planner.world import MAX_CELLS, Cell, Rect, Region, World
 
 __all__ = [
@@ -80,7 +83,10 @@ def _is_proposition(label: str) -> bool:
 
 @dataclass(frozen=True)
 class RunnerParams:
-    """Settings of the navigation runner (the paper's symbols in brackets).
+    """The scenario's ``[runner]`` table (the paper's symbols in brackets).
+
+    Each key maps onto a key of the run's configuration tree (:data:`planner.config.RUNNER_KEYS`,
+    :class:`hopper_sim.config.RunnerSettings`), whose field holds the default.
 
     Attributes:
         batch_size: hops between two GP refits and re-syntheses.
@@ -96,15 +102,15 @@ class RunnerParams:
             :class:`planner.verdict.MissionMonitor`).
     """
 
-    batch_size: int = 50
-    max_steps: int = 500
-    p_rl_ee: float = 0.5
-    c: float = 0.5
-    eps: float = 0.005
-    discount: float = 0.95
-    runs: int = 1
-    seed: int = 0
-    window: int = 0
+    batch_size: int = RunConfig.batch_size
+    max_steps: int = RunConfig.max_steps
+    p_rl_ee: float = SwitchingSettings.p_rl_explore
+    c: float = SwitchingSettings.c
+    eps: float = SwitchingSettings.eps
+    discount: float = QLearningSettings.discount
+    runs: int = RunConfig.runs
+    seed: int = RunConfig.seed
+    window: int = RunConfig.window
 
     def __post_init__(self) -> None:
         checks: dict[str, tuple[Callable[[Any], bool], str]] = {
@@ -160,7 +166,7 @@ class Scenario:
     rewards: Mapping[str, float] = field(default_factory=dict)
     hazard: str = "Haz"
     goal: str = "Goal"
-    p_sat: float = 0.65
+    p_sat: float = SwitchingSettings.p_sat
     reward_known: bool = True
     collect: str = "once"
     runner: RunnerParams = field(default_factory=RunnerParams)

@@ -29,7 +29,7 @@ Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case stud
     [rewards]                       # per label, collected on landing
     A = 20.0
 
-    [runner]                        # all optional; defaults in RunnerParams
+    [runner]                        # all optional; see RunnerParams
     batch_size = 50
 
 :func:`parse_scenario` and :func:`scenario_from_dict` take the text and the parsed table.
@@ -235,7 +235,7 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
         rewards=rewards,
         hazard=r.scalar(data, "hazard", "hazard", "str", "Haz"),
         goal=r.scalar(data, "goal", "goal", "str", "Goal"),
-        p_sat=r.scalar(data, "p_sat", "p_sat", "float", 0.65),
+        p_sat=r.scalar(data, "p_sat", "p_sat", "float", Scenario.p_sat),
         reward_known=r.scalar(data, "reward_known", "reward_known", "bool", True),
         collect=r.scalar(data, "collect", "collect", "str", "once"),
         runner=runner,

@@ -262,10 +262,10 @@ class MissionMonitor:
     Args:
         verdicts: the automaton's regions (its ``excluded`` proposition: the hazard label).
         window: hops of the last window judged at the end of an open run (0: the last half
-            of the run, at least one hop).
+            of the run, at least one hop; a run's: :attr:`planner.config.RunConfig.window`).
     """
 
-    def __init__(self, verdicts: AutomatonVerdicts, window: int = 0) -> None:
+    def __init__(self, verdicts: AutomatonVerdicts, window: int) -> None:
         if window < 0:
             raise ValueError(f"window must be >= 0, got {window}")
         self.verdicts = verdicts

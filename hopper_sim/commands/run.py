@@ -16,7 +16,15 @@ import json
 import sys
 from pathlib import Path
 
-from hopnav.arguments import figure_file, input_file, non_negative_int, output_file, positive_int
+from hopnav.arguments import (
+    add_set_argument,
+    figure_file,
+    input_file,
+    non_negative_int,
+    output_file,
+    positive_int,
+    run_config,
+)
 from hopnav.errors import RunFailed, UsageError
 from hopnav.kernels import prepare_kernels
 
@@ -34,15 +42,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--explore-to",
         choices=("nonviolating", "accepting"),
-        default="nonviolating",
-        help="end components exploration steers to (see RunnerSettings.candidates)",
+        help="end components exploration steers to (planner.candidates) [nonviolating]",
     )
     p.add_argument(
         "--tour",
         choices=("reward", "coverage"),
-        default="reward",
-        help="exploration inside the chosen component (see RunnerSettings.tour)",
+        help="exploration inside the chosen component (planner.tour) [reward]",
     )
+    add_set_argument(p)
     p.add_argument("--rrd", help="rerun recording to write (default: runs/<scenario>.rrd)")
     p.add_argument(
         "--png", help="figure of the last run, .png/.svg/.pdf (default: runs/<scenario>.png)"
@@ -243,6 +250,18 @@ def _report(args, sc, ends, files: dict, prov: dict) -> None:
             print(f"{key}: {path}")
 
 
+def _settings(args: argparse.Namespace, sc):
+    """The run's configuration tree: the scenario's, the flags, then ``--set``."""
+    flags = {
+        "run.max_steps": ("--max-steps", args.max_steps),
+        "run.runs": ("--runs", args.runs),
+        "run.seed": ("--seed", args.seed),
+        "planner.candidates": ("--explore-to", args.explore_to),
+        "planner.tour": ("--tour", args.tour),
+    }
+    return run_config(sc, args.set, flags)
+
+
 def _outputs(args: argparse.Namespace, sc) -> tuple[Path | None, Path | None]:
     """The recording and figure paths of ``args`` (``None``: not written), with ``--q-table``
     checked: refused for a known-reward scenario, its folder writable."""
@@ -259,14 +278,13 @@ def _outputs(args: argparse.Namespace, sc) -> tuple[Path | None, Path | None]:
     return rrd, png
 
 
-def _runner(args: argparse.Namespace, sc, ckpt_path: Path, learner):
-    """The navigation runner of scenario ``sc`` (already with ``--max-steps``) on the
-    controller of ``ckpt_path``, exploring as ``--explore-to``/``--tour`` say."""
+def _runner(args: argparse.Namespace, sc, settings, ckpt_path: Path, learner):
+    """The navigation runner of scenario ``sc`` (with the tree applied) on the controller of
+    ``ckpt_path``, configured by the tree ``settings``."""
     from hopper_sim.environment import HopperGridEnv
-    from hopper_sim.runner import NavigationRunner, RunnerSettings
+    from hopper_sim.runner import NavigationRunner
 
     model, controller = _controller(ckpt_path)
-    settings = RunnerSettings(candidates=args.explore_to, tour=args.tour)
     env = HopperGridEnv(sc, model=model, controller=controller, settings=settings.env)
     try:
         return NavigationRunner(sc, env=env, settings=settings, learner=learner)
@@ -283,6 +301,7 @@ def run(args: argparse.Namespace) -> int:
         sc = load_scenario(args.scenario)
     except PlannerError as err:
         raise UsageError(str(err)) from None
+    settings = _settings(args, sc)
     rrd, png = _outputs(args, sc)
     from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
     from hopper_sim.provenance import provenance
@@ -297,10 +316,9 @@ def run(args: argparse.Namespace) -> int:
     from hopper_sim.figures import FigureWriter
     from hopper_sim.recording import RerunRecorder
 
-    if args.max_steps is not None:
-        sc = sc.with_runner(max_steps=args.max_steps)
-    n_runs = sc.runner.runs if args.runs is None else args.runs
-    runner = _runner(args, sc, ckpt_path, learner)
+    sc = settings.apply_to(sc)
+    n_runs = sc.runner.runs
+    runner = _runner(args, sc, settings, ckpt_path, learner)
 
     prepare_kernels("hopnav run", quiet=args.quiet or args.json)
     for path in (rrd, png):
@@ -318,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
         observers.append(writer)
     runner.observer = fan = Observers(observers)
     files = {"rrd": None if rrd is None else str(rrd), "png": None if png is None else str(png)}
-    seed = sc.runner.seed if args.seed is None else args.seed
+    seed = sc.runner.seed
     failure: str | None = None
     try:
         runner.run_many(n_runs, seed)

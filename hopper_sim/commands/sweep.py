@@ -9,7 +9,9 @@ the table beside the paper's and writes ``sweep_runs.csv`` (one row per run),
 ``table_i.png`` (reward and steps with their intervals against C and eps, the paper's values
 overlaid; :mod:`hopper_sim.sweep_plot`) to ``--out``.
 The seeds derive from ``--seed`` alone, so the table does not depend on the backend or on the
-number of workers.
+number of workers. ``--set KEY=VALUE`` (repeatable) changes a setting of every run's
+configuration tree (``hopnav config`` lists the keys), except those the sweep sets itself
+(``switching.p_rl_explore``, ``switching.c``, ``switching.eps``, ``run.seed``, ``run.runs``).
 
 ``sweep_runs.csv`` is rewritten (atomically) after every finished run, so an interrupted
 (Ctrl-C, SIGTERM, or even SIGKILL) sweep leaves the runs it finished; ``--resume`` reuses
@@ -31,7 +33,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from hopnav.arguments import non_negative_int, output_folder, positive_int
+from hopnav.arguments import add_set_argument, non_negative_int, output_folder, positive_int
 from hopnav.errors import RunFailed, UsageError
 from hopnav.kernels import prepare_kernels
 
@@ -84,6 +86,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--epss", type=_levels, default=None, help="comma-separated eps [0.0025,0.005,0.0075]"
     )
     p.add_argument("--out", default=os.path.join("runs", "sweep"), help="[runs/sweep]")
+    add_set_argument(p)
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
@@ -101,17 +104,58 @@ def _kept(finished: list, rows: Path) -> str:
     return f"the {len(finished)} finished runs are in {rows}; add --resume to run only the others"
 
 
-def grid_record(spec: Any) -> dict[str, Any]:
-    """The grid of a sweep as recorded in ``sweep_meta.json`` (what ``--resume`` must match)."""
-    return {"cs": list(spec.cs), "epss": list(spec.epss), "runs": spec.runs, "seed": spec.seed}
+#: keys of the configuration tree that the sweep sets itself (per cell and run)
+SWEPT_KEYS = (
+    "planner.switching.p_rl_explore",
+    "planner.switching.c",
+    "planner.switching.eps",
+    "run.seed",
+    "run.runs",
+)
+
+
+def grid_record(spec: Any, sets: dict[str, str] | None = None) -> dict[str, Any]:
+    """The grid of a sweep as recorded in ``sweep_meta.json`` (what ``--resume`` must match),
+    with the ``--set`` changes where there are any."""
+    grid = {"cs": list(spec.cs), "epss": list(spec.epss), "runs": spec.runs, "seed": spec.seed}
+    if sets:
+        grid["set"] = dict(sets)
+    return grid
+
+
+def _sets(scenario: Any, items: list[str]) -> dict[str, str]:
+    """The ``--set`` changes by full key, checked on ``scenario``'s configuration tree.
+
+    Raises:
+        UsageError: a malformed or unknown key, a bad value, or a key the sweep sets.
+    """
+    if not items:
+        return {}  # (and the tree's modules stay unimported until the runs start)
+    from hopper_sim.config import ConfigError, RunnerSettings, parse_assignments, resolve_key
+
+    try:
+        given = parse_assignments(items)
+        sets = {resolve_key(k, "--set: "): v for k, v in given.items()}
+        for key in sets:
+            if key in SWEPT_KEYS:
+                raise UsageError(
+                    f"--set {key}: the sweep sets it (per cell: --cs, --epss; per run: "
+                    "--runs, --seed)"
+                )
+        RunnerSettings.from_scenario(scenario).override(sets, text=True, source="--set")
+    except ConfigError as err:
+        raise UsageError(str(err)) from None
+    return sets
 
 
 def _describe(grid: Any) -> str:
     if not isinstance(grid, dict):
         return repr(grid)
+    sets = grid.get("set")
+    changes = f", --set {' '.join(f'{k}={v}' for k, v in sets.items())}" if sets else ""
     return (
         f"C {grid.get('cs')}, eps {grid.get('epss')}, {grid.get('runs')} runs per cell, "
-        f"seed {grid.get('seed')}"
+        f"seed {grid.get('seed')}{changes}"
     )
 
 
@@ -149,7 +193,8 @@ def _prepare(args: argparse.Namespace, out: Path):
             seed=args.seed,
         )
         prov = provenance(scenario, DEFAULT_CHECKPOINT)  # the runs use the shipped controller
-        grid = grid_record(spec)
+        sets = _sets(scenario, args.set)
+        grid = grid_record(spec, sets)
         if args.resume:
             previous = _previous_rows(out, prov, grid, read_rows_csv)
         else:
@@ -194,6 +239,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_sweep(
             scenario,
             spec,
+            run=_run_function(sets),
             backend=args.backend,
             workers=args.workers,
             ray_address=args.ray_address,
@@ -232,6 +278,17 @@ def _print_results(args: argparse.Namespace, result: Any, spec: Any, paths: dict
     )
     for kind, path in paths.items():
         print(f"{kind}: {path}")
+
+
+def _run_function(sets: dict[str, str]) -> Callable | None:
+    """The run function of the workers: the default one, with the ``--set`` changes."""
+    if not sets:
+        return None
+    import functools
+
+    from hopper_sim.runner import run_single
+
+    return functools.partial(run_single, overrides=sets)
 
 
 def _previous_rows(
@@ -281,7 +338,7 @@ def _previous_rows(
     if meta.get("grid") != grid:
         raise SweepError(
             f"cannot resume: {out} holds a sweep of another grid ({_describe(meta.get('grid'))}); "
-            f"this one is {_describe(grid)} (use the same --cs/--epss/--runs/--seed, another "
+            f"this one is {_describe(grid)} (use the same --cs/--epss/--runs/--seed/--set, another "
             "--out, or --force to start over)"
         )
     return read_rows(rows_path) if rows_path.is_file() else []

@@ -35,7 +35,7 @@ class DiscountedReward:
     """Discounted reward ``sum_k gamma^k W(s_{k+1})`` (``W`` collected on landing)."""
 
     reward: np.ndarray
-    discount: float = 0.95
+    discount: float
 
 
 @dataclass(frozen=True)

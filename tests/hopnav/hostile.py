@@ -1163,8 +1163,49 @@ def imdp_check_cases() -> list[Case]:
     return cases
 
 
+def settings_cases() -> list[Case]:
+    """``--set`` on the commands that run the loop, and ``hopnav config``: the key named."""
+    bad = [
+        ("unknown", "switching.cc=1", "switching.cc: unknown key"),
+        ("no-equals", "switching.c", "expected KEY=VALUE"),
+        ("empty-key", "=1", "expected KEY=VALUE"),
+        ("type", "delta=abc", "planner.delta: expected a number"),
+        ("range", "delta=2", "planner.delta: delta must lie in (0, 1)"),
+        ("discount", "discount=1", "planner.q_learning.discount"),
+        ("p-sat", "p_sat=0", "planner.switching.p_sat"),
+        ("bool", "env.noise=maybe", "env.noise: expected true or false"),
+        ("int", "run.max_steps=2.5", "run.max_steps: expected a whole number"),
+        ("choice", "tour=spiral", "planner.tour"),
+        ("derived", "planner.noise=1", "planner.noise: derived"),
+        ("gp", "gp.lengthscale=-1", "gp.lengthscale"),
+        ("nan", "delta=nan", "planner.delta: must be a finite number"),
+        ("huge", "run.max_steps=" + "9" * 5000, "run.max_steps"),
+    ]
+    cases = []
+    for name, item, says in bad:
+        for command in ("run", "sweep", "config"):
+            extra = ("--out", "o") if command == "sweep" else ()
+            cases.append(
+                Case(f"set-{command}-{name}", (command, *extra, "--set", item), says=(says,))
+            )
+    cases += [
+        Case("set-run-twice", ("run", "--set", "c=0.1", "--set", "c=0.2"), says=("given twice",)),
+        Case(
+            "set-run-and-flag",
+            ("run", "--max-steps", "5", "--set", "run.max_steps=4"),
+            says=("also given by --max-steps",),
+        ),
+        Case(
+            "set-sweep-swept", ("sweep", "--out", "o", "--set", "c=0.3"), says=("the sweep sets",)
+        ),
+        Case("config-no-scenario", ("config", "--scenario", "nope.toml"), says=("nope.toml",)),
+    ]
+    return cases
+
+
 def all_cases() -> list[Case]:
     cases = [
+        *settings_cases(),
         *issue_tracebacks(),
         *issue_hangs(),
         *issue_wrong_successes(),

@@ -22,6 +22,7 @@ from tests.planner.conftest import action_error
 
 NX, NY, CELL = 15, 15, 1.0
 GRID = GridWorld(NX, NY, CELL)
+BOUNDS = {"samples_per_axis": 3, "delta": 0.01, "horizon": 100}  # the abstraction's options
 NA = 8
 
 
@@ -85,13 +86,13 @@ def test_confidence_beta_is_the_union_bound_quantile():
 
 
 def test_beta_is_set_by_the_run_horizon():
-    b = cell_error_bounds(LandingErrorGP(), GRID, delta=0.01, horizon=100)
+    b = cell_error_bounds(LandingErrorGP(), GRID, samples_per_axis=3, delta=0.01, horizon=100)
     # two axes, two-sided, one departure per hop: delta / (4 horizon) per tail
     assert b.beta == pytest.approx(norm.isf(0.01 / 400))
     assert b.lower.shape == b.upper.shape == (NX * NY, NA, 2)
     assert b.residual_std.shape == (NA, 2)
     with pytest.raises(IntervalError, match="horizon"):
-        cell_error_bounds(LandingErrorGP(), GRID, horizon=0)
+        cell_error_bounds(LandingErrorGP(), GRID, **{**BOUNDS, "horizon": 0})
 
 
 def test_rows_cover_exactly_the_enabled_actions():
@@ -243,17 +244,17 @@ class _Predictor:
 )
 def test_interval_step_rejects_a_broken_predictor(predictor, match):
     with pytest.raises(IntervalError, match=match):
-        cell_error_bounds(predictor, GRID)
+        cell_error_bounds(predictor, GRID, **BOUNDS)
 
 
 def test_prior_intervals_are_wide():
-    ti = transition_intervals(cell_error_bounds(LandingErrorGP(), GRID), GRID)
+    ti = transition_intervals(cell_error_bounds(LandingErrorGP(), GRID, **BOUNDS), GRID)
     _, shi, enabled = _row_sums(ti)
     assert shi[enabled].min() > 2.0
 
 
 def test_error_bounds_contain_the_true_field(fitted_gp):
-    bounds = cell_error_bounds(fitted_gp, GRID, samples_per_axis=4)
+    bounds = cell_error_bounds(fitted_gp, GRID, **{**BOUNDS, "samples_per_axis": 4})
     dense = cell_sample_points(GRID, 9)  # other points than the bounds' samples
     inside = []
     for a in range(NA):
@@ -264,13 +265,15 @@ def test_error_bounds_contain_the_true_field(fitted_gp):
         )
     assert np.all(inside)
     width = bounds.upper - bounds.lower
-    assert width.mean() < 0.7 * (cell_error_bounds(LandingErrorGP(), GRID).upper * 2).mean()
+    assert (
+        width.mean() < 0.7 * (cell_error_bounds(LandingErrorGP(), GRID, **BOUNDS).upper * 2).mean()
+    )
 
 
 def test_empirical_frequencies_lie_in_the_intervals(fitted_gp):
     rng = np.random.default_rng(12)
     noise = TruncatedGaussianNoise()
-    bounds = cell_error_bounds(fitted_gp, GRID)
+    bounds = cell_error_bounds(fitted_gp, GRID, **BOUNDS)
     ti = transition_intervals(bounds, GRID, noise)
     state, action = np.nonzero(GRID.enabled[: NX * NY])
     pick = rng.choice(len(state), size=40, replace=False)
@@ -288,6 +291,6 @@ def test_empirical_frequencies_lie_in_the_intervals(fitted_gp):
 
 
 def test_fitted_model_settings_shape_the_prior():
-    wide = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.5)), GRID)
-    narrow = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.05)), GRID)
+    wide = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.5)), GRID, **BOUNDS)
+    narrow = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.05)), GRID, **BOUNDS)
     assert (wide.upper > narrow.upper).all() and (wide.lower < narrow.lower).all()

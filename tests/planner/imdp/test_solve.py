@@ -176,7 +176,7 @@ def test_specification_errors():
     with pytest.raises(SpecificationError, match="state 3"):
         Problem(m, Specification(ReachAvoid([3])))
     with pytest.raises(SpecificationError, match="reward"):
-        Problem(m, Specification(DiscountedReward(np.zeros(2))))
+        Problem(m, Specification(DiscountedReward(np.zeros(2), 0.9)))
     with pytest.raises(SpecificationError, match="allowed"):
         Problem(m, Specification(ReachAvoid("g")), allowed=np.ones((2, 1), bool))
     with pytest.raises(SpecificationError, match="tolerance"):
