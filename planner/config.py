@@ -17,7 +17,7 @@ from typing import Any
 
 from planner.errors import IntervalError, PlannerError, PolicyError
 from planner.intervals import TruncatedGaussianNoise
-from planner.modes import Candidates, TourMode
+from planner.modes import Candidates
 from planner.policy import SwitchingSettings
 from planner.qlearning import QLearningSettings
 from planner.tour import TOUR_MODES
@@ -96,8 +96,8 @@ class ResynthesisSettings:
     beta: float | None = None
     noise: TruncatedGaussianNoise = field(default_factory=TruncatedGaussianNoise)
     q_tolerance: float = 1e-6
-    candidates: str = Candidates.NONVIOLATING
-    tour: str = TourMode.REWARD
+    candidates: str = "nonviolating"
+    tour: str = "reward"
     switching: SwitchingSettings = field(default_factory=SwitchingSettings)
     q_learning: QLearningSettings = field(default_factory=QLearningSettings)
 
