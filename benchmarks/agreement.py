@@ -21,10 +21,10 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from hopper_sim.batch import simulate_hops
-from hopper_sim.hop import simulate_hop
-from hopper_sim.model import HopperModel
-from hopper_sim.reference import reference_hop
+from hopper_sim.physics.batch import simulate_hops
+from hopper_sim.physics.hop import simulate_hop
+from hopper_sim.physics.model import HopperModel
+from hopper_sim.physics.reference import reference_hop
 
 TARGETS = {"position [m]": 1e-4, "velocity [m/s]": 1e-4, "energy change [rel]": 1e-5}
 

@@ -7,7 +7,8 @@ Runs the scenario with seed ``S`` (the training run) and ``--velocity-runs`` mor
 (seeds ``S+1 ..``); fits the landing-error model on the training run's hops (with
 ``--train-runs K``, on the hops of the first ``K`` runs, as a longer run would have them:
 more data, narrower intervals, a harder test); then samples
-hops as the navigation loop makes them (:mod:`hopper_sim.audit`: a departure uniform in the
+hops as the navigation loop makes them (:mod:`hopper_sim.experiments.audit`: a departure uniform in
+the
 cell, a velocity drawn from all runs' departures, the audited action requested, the
 controller's backup switch among the loop's allowed actions, each hop counted for the action
 it executed) until every audited (cell, action) pair has ``--samples`` executed hops or its
@@ -29,8 +30,8 @@ from dataclasses import replace
 import numpy as np
 from tqdm import tqdm
 
-from hopper_sim.audit import audit_intervals, collect_run_data, excluded_landings
-from hopper_sim.runner import NavigationRunner
+from hopper_sim.experiments.audit import audit_intervals, collect_run_data, excluded_landings
+from hopper_sim.navigation.runner import NavigationRunner
 from planner.imdp.grid import ACTIONS
 from planner.scenario import load_scenario
 

@@ -1,5 +1,5 @@
 """Training-data generation rate (batched MuJoCo hops, thrust on) against a baseline of the
-same hops one at a time through :func:`hopper_sim.hop.simulate_hop`, in the same process.
+same hops one at a time through :func:`hopper_sim.physics.hop.simulate_hop`, in the same process.
 
     python benchmarks/bench_datagen.py [--samples 10000] [--baseline 300] [--nthread N]
 
@@ -17,8 +17,8 @@ from tqdm import tqdm
 from hopper_sim.controller.dataset import Sampling, generate_dataset, sample_inputs
 from hopper_sim.controller.hop_model import InputRanges
 from hopper_sim.controller.simulator import nominal_energy, simulator_hop_fn
-from hopper_sim.hop import simulate_hop
-from hopper_sim.model import HopperModel
+from hopper_sim.physics.hop import simulate_hop
+from hopper_sim.physics.model import HopperModel
 
 
 def main() -> None:

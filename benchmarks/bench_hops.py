@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from hopper_sim.batch import DEFAULT_HOPS_PER_SIM, simulate_hops
-from hopper_sim.hop import simulate_hop
-from hopper_sim.model import HopperModel
+from hopper_sim.physics.batch import DEFAULT_HOPS_PER_SIM, simulate_hops
+from hopper_sim.physics.hop import simulate_hop
+from hopper_sim.physics.model import HopperModel
 
 
 def main() -> int:

@@ -32,8 +32,8 @@ import time
 
 import numpy as np
 
-from hopper_sim.events import Observer
-from hopper_sim.runner import NavigationRunner
+from hopper_sim.navigation.events import Observer
+from hopper_sim.navigation.runner import NavigationRunner
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.analysis import satisfaction
 from planner.imdp.decoupled import DecoupledProduct, grid_decoupled_model

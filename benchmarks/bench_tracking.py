@@ -22,8 +22,8 @@ from tqdm import tqdm
 from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT, load_checkpoint
 from hopper_sim.controller.controller import LegAngleController
 from hopper_sim.controller.tracking import track_random_actions
-from hopper_sim.model import HopperModel
-from hopper_sim.terrain import TerrainField
+from hopper_sim.physics.model import HopperModel
+from hopper_sim.physics.terrain import TerrainField
 from planner.imdp.grid import ACTIONS
 
 

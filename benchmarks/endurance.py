@@ -4,7 +4,7 @@ field, landing noise and stance thrust all on.
 Steering (a simple proportional rule built on exact SLIP facts, computed here):
 
 * nominal gait: the steady hop with interstitial velocity (V_H, 0, V_Z); its touchdown angle
-  alpha* is the fixed point of the pure-SLIP hop map (vz_next = vz), ``hopper_sim.gait``;
+  alpha* is the fixed point of the pure-SLIP hop map (vz_next = vz), ``hopper_sim.physics.gait``;
 * alpha = alpha* + K (vz - V_Z) with K = -(d vz_next / d vz) / (d vz_next / d alpha), the
   deadbeat gain of the linearised return map (which is unstable with alpha fixed);
 * beta = clip(-K_BETA * e, -BETA_MAX, BETA_MAX), e the heading error towards the current
@@ -30,11 +30,11 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from hopper_sim.gait import steady_gait
-from hopper_sim.hop import simulate_hop
-from hopper_sim.model import HopperModel
-from hopper_sim.noise import sample_model_noise
-from hopper_sim.terrain import TerrainField
+from hopper_sim.physics.gait import steady_gait
+from hopper_sim.physics.hop import simulate_hop
+from hopper_sim.physics.model import HopperModel
+from hopper_sim.physics.noise import sample_model_noise
+from hopper_sim.physics.terrain import TerrainField
 
 # Nominal interstitial velocity [m/s]: 1.6 m hops with an apex of 1.46 m, so that a flight
 # lasts long enough for the noise impulse (nu / t_flight) to stay moderate.

@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from hopper_sim.audit import collect_run_data
-from hopper_sim.batch import simulate_hops
 from hopper_sim.controller.simulator import nominal_energy
-from hopper_sim.runner import NavigationRunner
+from hopper_sim.experiments.audit import collect_run_data
+from hopper_sim.navigation.runner import NavigationRunner
+from hopper_sim.physics.batch import simulate_hops
 from planner.imdp.grid import ACTION_OFFSETS, ACTIONS
 from planner.scenario import load_scenario
 

@@ -31,8 +31,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hopper_sim.events import Observer, RunEnd
-from hopper_sim.runner import NavigationRunner, RunnerSettings
+from hopper_sim.navigation.events import Observer, RunEnd
+from hopper_sim.navigation.runner import NavigationRunner, RunnerSettings
 from planner.scenario import load_scenario
 
 VIOLATIONS = ("hazard", "left the map")

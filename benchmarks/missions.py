@@ -14,7 +14,7 @@ import argparse
 from collections import Counter
 from pathlib import Path
 
-from hopper_sim.runner import NavigationRunner
+from hopper_sim.navigation.runner import NavigationRunner
 from planner.scenario import load_scenario
 
 GALLERY = Path(__file__).resolve().parents[1] / "examples" / "scenarios"

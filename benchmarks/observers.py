@@ -19,9 +19,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hopper_sim.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
-from hopper_sim.figures import FigureWriter
-from hopper_sim.recording import RerunRecorder
+from hopper_sim.navigation.events import HopEvent, Observer, RunEnd, RunStart, SynthesisEvent
+from hopper_sim.viz.figures import FigureWriter
+from hopper_sim.viz.recording import RerunRecorder
 from planner.scenario import load_scenario
 
 

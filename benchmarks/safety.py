@@ -6,7 +6,7 @@ Acceptance: no run enters a hazard or leaves the map, and the success rate is at
 worst-case satisfaction probability reported at the switch to goal reaching (>= P_sat).
 Prints per-run outcomes, the violation count, the success rate with its 95 % Wilson interval,
 the mean and minimum p_switch, and the runs that left the goal-reaching plan of their switch
-(the runner keeps that plan after the switch, see :mod:`hopper_sim.runner`).
+(the runner keeps that plan after the switch, see :mod:`hopper_sim.navigation.runner`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from tqdm import tqdm
 
-from hopper_sim.runner import run_single
+from hopper_sim.navigation.runner import run_single
 from planner.scenario import load_scenario
 
 

@@ -19,8 +19,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hopper_sim.events import RunEnd
-from hopper_sim.sweep import SweepSpec, available_cores, run_sweep
+from hopper_sim.experiments.sweep import SweepSpec, available_cores, run_sweep
+from hopper_sim.navigation.events import RunEnd
 from planner.scenario import load_scenario
 
 

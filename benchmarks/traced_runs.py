@@ -1,7 +1,8 @@
 """Navigation runs with a trace of the guarantee, in worker processes (for guarantee.py and
 guarantee_stability.py).
 
-A traced run is :func:`hopper_sim.runner.run_single`'s run plus: the worst-case satisfaction
+A traced run is :func:`hopper_sim.navigation.runner.run_single`'s run plus: the worst-case
+satisfaction
 probability at the start after every re-synthesis (``p_start``) and, for a run that left the
 goal-reaching plan of its switch, the hop that did it and what the intervals of the switch
 said about that landing: ``"excluded"`` (upper bound 0: the intervals were wrong) or
@@ -17,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hopper_sim.events import HopEvent, Observer, RunEnd, SynthesisEvent
-from hopper_sim.runner import NavigationRunner
-from hopper_sim.sweep_backends import _init_worker
+from hopper_sim.experiments.sweep_backends import _init_worker
+from hopper_sim.navigation.events import HopEvent, Observer, RunEnd, SynthesisEvent
+from hopper_sim.navigation.runner import NavigationRunner
 from planner.imdp.grid import ACTIONS
 from planner.intervals import TransitionIntervals
 from planner.learning import Resynthesis
@@ -94,7 +95,7 @@ def traced_run(scenario: Scenario, seed: int, run_index: int = 0) -> RunTrace:
 
 def run_traced(scenario: Scenario, seeds: list[int], workers: int) -> Iterator[RunTrace]:
     """Traced runs of ``scenario`` with ``seeds`` on ``workers`` spawned processes (one
-    compute thread each, as in :mod:`hopper_sim.sweep`), in completion order."""
+    compute thread each, as in :mod:`hopper_sim.experiments.sweep`), in completion order."""
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker) as pool:
         pending = {pool.submit(traced_run, scenario, s, k) for k, s in enumerate(seeds)}

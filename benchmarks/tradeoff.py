@@ -21,8 +21,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hopper_sim.sweep_files import ROWS_FILE, SweepFileError, read_rows_csv
-from hopper_sim.tradeoff import check_tradeoff, format_trends, paper_points
+from hopper_sim.experiments.sweep_files import ROWS_FILE, SweepFileError, read_rows_csv
+from hopper_sim.experiments.tradeoff import check_tradeoff, format_trends, paper_points
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,7 +11,7 @@ parallel.
 import argparse
 
 from hopper_sim import SweepSpec, provenance, run_sweep, write_outputs
-from hopper_sim.sweep_files import format_table
+from hopper_sim.experiments.sweep_files import format_table
 from planner import load_scenario
 
 

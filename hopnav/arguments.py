@@ -134,13 +134,13 @@ def output_file(
 
 def figure_file(path: str | os.PathLike[str], what: str) -> Path:
     """Check that a figure can be written at ``path``: its extension names a format of
-    :data:`hopper_sim.figure_files.FIGURE_FORMATS` (``.png``, ``.svg``, ``.pdf``), and
+    :data:`hopper_sim.viz.figure_files.FIGURE_FORMATS` (``.png``, ``.svg``, ``.pdf``), and
     :func:`output_file` accepts it.
 
     Raises:
         UsageError: naming the option, the path and the problem.
     """
-    from hopper_sim.figure_files import FIGURE_FORMATS
+    from hopper_sim.viz.figure_files import FIGURE_FORMATS
 
     target = Path(path)
     suffix = target.suffix.lower()
@@ -209,7 +209,12 @@ def run_config(
         UsageError: a malformed, unknown or ambiguous key, a wrong type or a value out of
             range (naming the option and the key), or a key set by a flag and ``--set``.
     """
-    from hopper_sim.config import ConfigError, RunnerSettings, parse_assignments, resolve_key
+    from hopper_sim.navigation.config import (
+        ConfigError,
+        RunnerSettings,
+        parse_assignments,
+        resolve_key,
+    )
 
     try:
         if scenario is None:

@@ -30,40 +30,40 @@ from hopnav.errors import EXIT_FAILED, EXIT_USAGE, CommandError
 #: command -> (module, one-line help), in the order ``hopnav --help`` lists them.
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": (
-        "hopper_sim.commands.run",
+        "hopper_sim.cli.run",
         "run a case study (default: scenario a) with recording, figure and summary",
     ),
     "sweep": (
-        "hopper_sim.commands.sweep",
+        "hopper_sim.cli.sweep",
         "reproduce Table I: reward / steps over P_RL,ee = C x eps, with 95 %% CIs",
     ),
     "config": (
-        "hopper_sim.commands.config",
+        "hopper_sim.cli.config",
         "print a run's configuration tree (every --set key with its value)",
     ),
     "scenario": (
-        "hopper_sim.commands.scenario",
+        "hopper_sim.cli.scenario",
         "validate a scenario (shipped name a-d or a TOML path) and print its map",
     ),
     "replay": (
-        "hopper_sim.commands.replay",
+        "hopper_sim.cli.replay",
         "open a .rrd recording in the rerun viewer, or print its summary headlessly",
     ),
     "hop": (
-        "hopper_sim.commands.hop",
+        "hopper_sim.cli.hop",
         "simulate one hop (or one per stdin line with --jsonl) and print the result",
     ),
     "automaton": (
-        "hopper_sim.commands.automaton",
+        "hopper_sim.cli.automaton",
         "translate an LTL formula to a deterministic Rabin automaton (HOA on stdout)",
     ),
     "figure": (
-        "hopper_sim.commands.figure",
+        "hopper_sim.cli.figure",
         "draw Figure 4 (runs scenarios or reads recordings) or the Table I plot",
     ),
-    "imdp": ("hopper_sim.commands.imdp", "solve or convert interval MDP files"),
+    "imdp": ("hopper_sim.cli.imdp", "solve or convert interval MDP files"),
     "train-controller": (
-        "hopper_sim.commands.train_controller",
+        "hopper_sim.cli.train_controller",
         "generate hop data with MuJoCo, train the hop MLP, write a controller checkpoint",
     ),
 }

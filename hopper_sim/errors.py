@@ -4,8 +4,8 @@ Every exception the simulation side raises derives from :class:`HopperSimError`,
 can catch all of them in one clause. Each also keeps its own other base (``ValueError`` for
 bad input or files, ``RuntimeError`` for a run or backend that failed), so that
 ``except ValueError`` callers keep working. The exceptions stay in the modules that raise
-them (``HopperModelError`` in :mod:`hopper_sim.model`, ``RecordingError`` in
-:mod:`hopper_sim.recording`, the controller's under :mod:`hopper_sim.controller.errors`...).
+them (``HopperModelError`` in :mod:`hopper_sim.physics.model`, ``RecordingError`` in
+:mod:`hopper_sim.viz.recording`, the controller's under :mod:`hopper_sim.controller.errors`...).
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 :class:`RunConfig` (the run's schedule) and :class:`ResynthesisSettings` (the abstraction and
 synthesis, holding the :class:`planner.policy.SwitchingSettings` and
 :class:`planner.qlearning.QLearningSettings`); the tree itself
-(:class:`hopper_sim.config.RunnerSettings`) composes them with the simulation's. Each default
+(:class:`hopper_sim.navigation.config.RunnerSettings`) composes them with the simulation's. Each
+default
 is defined once, in the dataclass field that holds it. A
 scenario's TOML ``[runner]`` table (:class:`planner.scenario.RunnerParams`) takes its defaults
 from these fields and maps onto the tree (:data:`RUNNER_KEYS`).
@@ -64,7 +65,7 @@ CANDIDATES: tuple[str, ...] = tuple(m.value for m in Candidates)
 @dataclass(frozen=True)
 class ResynthesisSettings:
     """Settings of :func:`resynthesise` and of the plans it makes (the planner's part of the
-    run's configuration tree, :class:`hopper_sim.config.RunnerSettings`).
+    run's configuration tree, :class:`hopper_sim.navigation.config.RunnerSettings`).
 
     ``samples_per_axis``: sample points per cell and axis for the per-(cell, action) error
     bounds; ``delta``, ``horizon`` and ``beta``: see :mod:`planner.intervals` (``beta=None``

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.config import RunConfig
 from planner.errors import (
     LTLSyntaxError,
     RegionOutsideWorldError,
@@ -36,7 +37,6 @@ from planner.errors import (
     UndefinedLabelError,
     UnknownPropositionError,
 )
-from planner.config import RunConfig
 from planner.ltl.parser import check_propositions, parse
 from planner.policy import SwitchingSettings
 from planner.qlearning import QLearningSettings
@@ -86,7 +86,7 @@ class RunnerParams:
     """The scenario's ``[runner]`` table (the paper's symbols in brackets).
 
     Each key maps onto a key of the run's configuration tree (:data:`planner.config.RUNNER_KEYS`,
-    :class:`hopper_sim.config.RunnerSettings`), whose field holds the default.
+    :class:`hopper_sim.navigation.config.RunnerSettings`), whose field holds the default.
 
     Attributes:
         batch_size: hops between two GP refits and re-syntheses.

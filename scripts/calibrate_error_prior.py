@@ -4,7 +4,7 @@ Usage: python scripts/calibrate_error_prior.py [--states 150] [--seed 0] [--out 
 
 Simulates the controller's landing error per action on the nominal hopper (no terrain, no
 noise) from a chain of loop-like departure states and the largest sensitivity of a landing to
-a stance force (:func:`hopper_sim.error_prior.calibrate`), prints them and writes them as
+a stance force (:func:`hopper_sim.controller.error_prior.calibrate`), prints them and writes them as
 JSON (default: ``hopper_sim/data/error_prior.json``, which :func:`error_prior` uses when its
 fingerprints match the model and controller). Run it after retraining the controller or
 changing the model.
@@ -22,8 +22,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopper_sim.controller import LegAngleController, load_checkpoint
-from hopper_sim.error_prior import SHIPPED, calibrate, save_calibration
-from hopper_sim.model import HopperModel
+from hopper_sim.controller.error_prior import SHIPPED, calibrate, save_calibration
+from hopper_sim.physics.model import HopperModel
 from planner.imdp.grid import ACTIONS
 
 

@@ -53,21 +53,21 @@ def _write_text(path: Path) -> None:
 
 
 def _sweep_files(path: Path) -> None:
-    from hopper_sim.sweep_files import atomic_write_text
+    from hopper_sim.experiments.sweep_files import atomic_write_text
 
     atomic_write_text(path, "a,b\n1,2\n")
 
 
 def _figure(path: Path) -> None:
-    from hopper_sim.figures import render_run_figure
+    from hopper_sim.viz.figures import render_run_figure
     from planner.scenario import load_scenario
 
     render_run_figure(load_scenario("a"), [], path)
 
 
 def _table_plot(path: Path) -> None:
-    from hopper_sim.sweep import SweepRow, summarize
-    from hopper_sim.sweep_plot import write_table_plot
+    from hopper_sim.experiments.sweep import SweepRow, summarize
+    from hopper_sim.viz.sweep_plot import write_table_plot
 
     row = SweepRow(0.5, 0.005, 0.5, 0, 7, "success", 12, 5.0, 3, 0.9, 1, 0.8, "")
     write_table_plot(summarize([row, row]), path)
@@ -108,7 +108,7 @@ def _model(fmt: str) -> Callable[[Path], None]:
 
 
 def _recording(path: Path) -> None:
-    from hopper_sim.recording import RerunRecorder
+    from hopper_sim.viz.recording import RerunRecorder
     from planner.scenario import load_scenario
     from tests.hopper_sim.synthetic_runs import run_events
 

@@ -26,7 +26,7 @@ def test_every_export_resolves(package):
 
 
 def test_exports_are_the_defining_objects():
-    from hopper_sim.runner import NavigationRunner
+    from hopper_sim.navigation.runner import NavigationRunner
     from planner.imdp import solve
     from planner.ltl.parser import parse
 

@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hopper_sim.controller.errors import ControllerError
-from hopper_sim.recording import RecordingError
-from hopper_sim.sweep_files import SweepFileError
+from hopper_sim.experiments.sweep_files import SweepFileError
+from hopper_sim.viz.recording import RecordingError
 from planner.errors import PlannerError
 from tests.hopnav.hostile import BMDP, DRN, LAB, TRA, scenario
 
@@ -225,8 +225,8 @@ def test_dataset_reader(tmp_path, data):
 
 
 def _csv_bytes() -> bytes:
-    from hopper_sim.sweep import SweepRow
-    from hopper_sim.sweep_files import rows_csv
+    from hopper_sim.experiments.sweep import SweepRow
+    from hopper_sim.experiments.sweep_files import rows_csv
 
     row = SweepRow(0.5, 0.005, 0.5, 0, 7, "success", 12, 5.0, 3, 0.9, 1, 0.8, "reached")
     return rows_csv([row, row], {"scenario": "a", "scenario_sha256": "d" * 64}).encode()
@@ -235,14 +235,14 @@ def _csv_bytes() -> bytes:
 @FAST
 @given(data=hostile(_csv_bytes()))
 def test_sweep_csv_reader(tmp_path, data):
-    from hopper_sim.sweep_files import read_rows_csv
+    from hopper_sim.experiments.sweep_files import read_rows_csv
 
     _only_own_errors(lambda: read_rows_csv(_write(tmp_path, "r.csv", data)), SweepFileError)
 
 
 @pytest.fixture(scope="module")
 def recording_bytes(tmp_path_factory):
-    from hopper_sim.recording import RerunRecorder
+    from hopper_sim.viz.recording import RerunRecorder
     from planner.scenario import load_scenario
     from tests.hopper_sim.synthetic_runs import run_events
 
@@ -265,8 +265,8 @@ _HANDLERS = {
 @SLOW
 @given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["random", "cut", "flip"]))
 def test_recording_reader(tmp_path, recording_bytes, seed, kind):
-    from hopper_sim.recording import read_runs
-    from hopper_sim.recording_reader import summarize_recording
+    from hopper_sim.viz.recording import read_runs
+    from hopper_sim.viz.recording_reader import summarize_recording
 
     rng = np.random.default_rng(seed)
     data = bytearray(recording_bytes)

@@ -103,7 +103,7 @@ def test_modules_and_data_come_from_the_wheel(installed):
     python, env, cwd = installed
     code = (
         "import json, sys, importlib.metadata as md, hopnav, planner, hopper_sim\n"
-        "from hopper_sim import constants\n"
+        "from hopper_sim.physics import constants\n"
         "from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT\n"
         "from planner.scenario import resolve_scenario_path\n"
         "print(json.dumps({'files': [hopnav.__file__, planner.__file__, hopper_sim.__file__,\n"

@@ -1,4 +1,4 @@
-"""The MuJoCo hop map (:func:`hopper_sim.batch.simulate_hops`) as a :class:`BatchHopFn`.
+"""The MuJoCo hop map (:func:`hopper_sim.physics.batch.simulate_hops`) as a :class:`BatchHopFn`.
 
 Thrust: the navigation hops with the stance thrust on, regulated to the nominal energy
 ``E_nom = m V_nom^2 / 2 + m g l0`` (interstitial speed ``V_nom`` at height ``l0``), so the
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hopper_sim.batch import simulate_hops
 from hopper_sim.controller.dataset import BatchHopFn, HopSamples
-from hopper_sim.model import HopperModel
+from hopper_sim.physics.batch import simulate_hops
+from hopper_sim.physics.model import HopperModel
 
 
 def nominal_energy(model: HopperModel, speed: float) -> float:

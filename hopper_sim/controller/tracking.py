@@ -18,10 +18,10 @@ import numpy as np
 
 from hopper_sim.controller.controller import LegAngleController
 from hopper_sim.controller.simulator import nominal_energy
-from hopper_sim.hop import simulate_hop
-from hopper_sim.model import HopperModel
-from hopper_sim.noise import sample_model_noise
-from hopper_sim.terrain import ForceField
+from hopper_sim.physics.hop import simulate_hop
+from hopper_sim.physics.model import HopperModel
+from hopper_sim.physics.noise import sample_model_noise
+from hopper_sim.physics.terrain import ForceField
 from planner.imdp.grid import ACTION_OFFSETS, ACTIONS
 
 

@@ -12,7 +12,7 @@ and executes action ``a``::
 
 * ``c_{a,d} ~ N(bias_mean[a, d], bias_std^2)``: a constant per action (the controller's bias:
   measured undershoots of 0.07 m for one-cell and 0.18-0.2 m for two-cell hops; for MuJoCo
-  the prior mean is simulated, :mod:`hopper_sim.error_prior`);
+  the prior mean is simulated, :mod:`hopper_sim.controller.error_prior`);
 * ``o_d ~ N(0, offset_std^2)``: the error of a force that is the same everywhere (the
   uniform part of the terrain force, e.g. a slope), shared by the coupled actions; an
   uncoupled action has its own ``o_{a,d}`` of the same std. It does not vary with the
@@ -43,7 +43,7 @@ effect on two actions from the same state correlates with 0.88-1.0 (mean 0.97) a
 actions that move at most one cell along the axis, but only -0.55 .. 0.5 between a two-cell
 hop *along* the axis and any other action (a two-cell hop's landing is 3-4 times less
 sensitive to a stance force along its direction); hence the coupling and ``rho = 0.95``.
-For MuJoCo (:func:`hopper_sim.error_prior.error_prior`) ``field_std`` is the terrain
+For MuJoCo (:func:`hopper_sim.controller.error_prior.error_prior`) ``field_std`` is the terrain
 amplitude times the largest sensitivity of a landing to a stance force (0.124 m; measured
 stds of the terrain's effect 0.12-0.16 m for one-cell hops, 0.04-0.05 m along two-cell hops,
 so the prior is conservative for the latter) and ``lengthscale`` the terrain's.

@@ -95,7 +95,7 @@ def scenario(
 
 
 def sweep_csv_header() -> str:
-    from hopper_sim.sweep import ROW_COLUMNS
+    from hopper_sim.experiments.sweep import ROW_COLUMNS
 
     return ",".join(ROW_COLUMNS) + "\n"
 
@@ -140,8 +140,8 @@ def q_table_of(name: str) -> Callable[[], bytes]:
         from pathlib import Path
 
         from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
-        from hopper_sim.provenance import provenance
-        from hopper_sim.runner import NavigationRunner
+        from hopper_sim.experiments.provenance import provenance
+        from hopper_sim.navigation.runner import NavigationRunner
         from planner.scenario import load_scenario
 
         sc = load_scenario(name)
@@ -557,7 +557,7 @@ def meta_for(name: str, grid: str | None) -> Callable[[], bytes]:
         import json
 
         from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT
-        from hopper_sim.provenance import provenance
+        from hopper_sim.experiments.provenance import provenance
         from planner.scenario import load_scenario
 
         prov = provenance(load_scenario(name), DEFAULT_CHECKPOINT)

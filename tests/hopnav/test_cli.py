@@ -61,9 +61,7 @@ def test_validation_errors_come_before_heavy_imports():
 
 
 def test_every_command_module_is_listed():
-    modules = {
-        p.stem for p in (ROOT / "hopper_sim" / "commands").glob("*.py") if p.stem != "__init__"
-    }
+    modules = {p.stem for p in (ROOT / "hopper_sim" / "cli").glob("*.py") if p.stem != "__init__"}
     listed = {module.rsplit(".", 1)[1] for module, _ in COMMANDS.values()}
     assert modules == listed
     parser = build_parser("*")  # every command registers with its module's own parser
@@ -94,7 +92,7 @@ def test_unknown_command_and_option_are_one_line(hopnav):
 
 
 def test_an_unexpected_error_is_one_line(hopnav, monkeypatch):
-    from hopper_sim.commands import automaton
+    from hopper_sim.cli import automaton
     from tests.hopnav.conftest import assert_one_line_failure
 
     def broken(args):

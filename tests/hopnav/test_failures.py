@@ -87,10 +87,10 @@ def test_train_controller_help_names_the_default_destination(hopnav):
 def test_unwritable_destination_fails_before_any_work(
     hopnav, tmp_path, blocked, monkeypatch, make_args, what
 ):
-    import hopper_sim.commands.imdp
+    import hopper_sim.cli.imdp
     import hopper_sim.controller.dataset
-    import hopper_sim.runner
-    import hopper_sim.sweep
+    import hopper_sim.experiments.sweep
+    import hopper_sim.navigation.runner
     import planner.warmup
 
     def work(*args, **kwargs):
@@ -98,10 +98,10 @@ def test_unwritable_destination_fails_before_any_work(
 
     for module, name in [
         (planner.warmup, "compile_kernels"),
-        (hopper_sim.runner.NavigationRunner, "run"),
-        (hopper_sim.sweep, "run_sweep"),
+        (hopper_sim.navigation.runner.NavigationRunner, "run"),
+        (hopper_sim.experiments.sweep, "run_sweep"),
         (hopper_sim.controller.dataset, "generate_dataset"),
-        (hopper_sim.commands.imdp, "scenario_product_model"),
+        (hopper_sim.cli.imdp, "scenario_product_model"),
     ]:
         monkeypatch.setattr(module, name, work)
     monkeypatch.chdir(tmp_path)
@@ -187,7 +187,7 @@ def test_imdp_bad_input_is_exit_code_2(hopnav, tmp_path):
 
 
 def test_imdp_formats_match_the_library():
-    from hopper_sim.commands import imdp as command
+    from hopper_sim.cli import imdp as command
     from planner.imdp import io
 
     assert command.FORMATS == io.FORMATS
@@ -244,7 +244,7 @@ def _q_table_of(scenario_name: str, path: Path, provenance_record: dict | None) 
 
 
 def test_q_table_of_another_scenario_is_refused(hopnav, tmp_path):
-    from hopper_sim.provenance import provenance
+    from hopper_sim.experiments.provenance import provenance
     from planner.scenario import load_scenario
 
     q = _q_table_of("c", tmp_path / "q.npz", {"provenance": provenance(load_scenario("c"))})
@@ -333,7 +333,7 @@ def _interrupt_after(args: list[str], marker: bytes, cwd: Path) -> tuple[int, st
 
 @pytest.mark.slow
 def test_ctrl_c_keeps_the_finished_runs(tmp_path):
-    from hopper_sim.recording import summarize_recording
+    from hopper_sim.viz.recording import summarize_recording
 
     args = ["run", "--scenario", "c", "--runs", "50", "--max-steps", "5", "--seed", "2"]
     code, out, err = _interrupt_after(args, b"run 3/50", tmp_path)

@@ -111,7 +111,7 @@ def warm():
     measures its own time and memory, not the first import of torch."""
     for module, _ in COMMANDS.values():
         importlib.import_module(module)
-    for name in ("torch", "mujoco", "rerun", "matplotlib.pyplot", "hopper_sim.runner"):
+    for name in ("torch", "mujoco", "rerun", "matplotlib.pyplot", "hopper_sim.navigation.runner"):
         importlib.import_module(name)
 
 

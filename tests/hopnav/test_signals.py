@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from hopnav.cli import main
-from hopper_sim.sweep_files import MARKDOWN_FILE, ROWS_FILE, read_rows_csv
+from hopper_sim.experiments.sweep_files import MARKDOWN_FILE, ROWS_FILE, read_rows_csv
 from tests.hopnav.hostile import scenario
 
 pytestmark = [
@@ -207,7 +207,7 @@ def test_run_interrupted_mid_run_removes_its_temporary_files(tmp_path, kind):
     if kept == 0:
         assert not rrd.exists()
     else:  # the recording is readable and holds every finished run
-        from hopper_sim.recording import summarize_recording
+        from hopper_sim.viz.recording import summarize_recording
 
         ended = [r for r in summarize_recording(rrd)["runs"] if r["outcome"] is not None]
         assert len(ended) == kept, (kept, ended)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hopper_sim.events import HopEvent, RunEnd, RunStart, SynthesisEvent
+from hopper_sim.navigation.events import HopEvent, RunEnd, RunStart, SynthesisEvent
 from planner.scenario import Scenario
 
 PERIOD = 0.45  # s per hop, close to the steady SLIP gait (hop k lasts PERIOD + 0.01 k)

@@ -48,15 +48,15 @@ def test_every_exception_derives_from_the_base(name):
 
 
 def test_builtin_bases_are_kept():
-    from hopper_sim.environment import EpisodeError
-    from hopper_sim.model import HopperModelError
-    from hopper_sim.recording import RecordingError
-    from hopper_sim.sweep import SweepBackendError, SweepRunError
+    from hopper_sim.experiments.sweep import SweepBackendError, SweepRunError
+    from hopper_sim.navigation.environment import EpisodeError
+    from hopper_sim.physics.model import HopperModelError
+    from hopper_sim.viz.recording import RecordingError
 
     assert issubclass(HopperModelError, ValueError) and issubclass(RecordingError, ValueError)
     assert issubclass(EpisodeError, RuntimeError) and issubclass(SweepRunError, RuntimeError)
     assert issubclass(SweepBackendError, RuntimeError)
     with pytest.raises(HopperSimError, match="flush_every"):
-        from hopper_sim.recording import RerunRecorder
+        from hopper_sim.viz.recording import RerunRecorder
 
         RerunRecorder("x.rrd", flush_every=0)

@@ -5,7 +5,7 @@ import pytest
 
 from hopper_sim.controller.simulator import nominal_energy, simulator_hop_fn
 from hopper_sim.controller.steady import steady_state
-from hopper_sim.model import HopperModel
+from hopper_sim.physics.model import HopperModel
 
 
 @pytest.fixture(scope="module")

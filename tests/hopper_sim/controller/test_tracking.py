@@ -8,7 +8,7 @@ import numpy as np
 from hopper_sim.controller.checkpoint import DEFAULT_CHECKPOINT, load_checkpoint
 from hopper_sim.controller.controller import LegAngleController
 from hopper_sim.controller.tracking import track_random_actions
-from hopper_sim.model import HopperModel
+from hopper_sim.physics.model import HopperModel
 
 
 def test_shipped_checkpoint_tracks_100_chained_hops():
