@@ -32,7 +32,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopper_sim.navigation.events import Observer, RunEnd
-from hopper_sim.navigation.runner import NavigationRunner, RunnerSettings
+from hopper_sim.navigation.runner import NavigationConfig, NavigationRunner
 from planner.scenario import load_scenario
 
 VIOLATIONS = ("hazard", "left the map")
@@ -51,11 +51,11 @@ class _Cells(Observer):
         self.cells[-1].append(int(event.cell))
 
 
-def _settings(sc, beta: float | None, tour: str | None) -> RunnerSettings:
+def _settings(sc, beta: float | None, tour: str | None) -> NavigationConfig:
     changes: dict = {"planner.beta": beta}
     if tour is not None:
         changes["planner.tour"] = tour
-    return RunnerSettings.from_scenario(sc).override(changes)
+    return NavigationConfig.from_scenario(sc).override(changes)
 
 
 def _sequence(job: tuple) -> tuple[str, int, list[RunEnd], list[list[int]]]:

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner.gp import LandingErrorGP, rbf_sparse_gp
 from planner.imdp.grid import ACTION_OFFSETS, GridWorld
 from planner.intervals import cell_error_bounds, cell_sample_points, transition_intervals
-from planner.learning import ResynthesisSettings
+from planner.learning import PlannerConfig
 
 BUDGET_S = 0.5
 LENGTHSCALE, STD, NOISE = 2.0, 0.124, 0.1
@@ -110,7 +110,7 @@ def main() -> int:
         t0 = time.perf_counter()
         gp.fit(pos, err, act)
         t1 = time.perf_counter()
-        bounds = cell_error_bounds(gp, grid, **ResynthesisSettings().interval_options())
+        bounds = cell_error_bounds(gp, grid, **PlannerConfig().interval_options())
         ti = transition_intervals(bounds, grid)
         t2 = time.perf_counter()
         times.append(t2 - t0)

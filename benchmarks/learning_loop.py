@@ -25,10 +25,10 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from planner.automaton import RabinAutomaton
-from planner.gp import FitSettings, LandingErrorGP
+from planner.gp import GPConfig, LandingErrorGP
 from planner.imdp.grid import ACTION_OFFSETS, GridWorld
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import ResynthesisSettings, resynthesise
+from planner.learning import PlannerConfig, resynthesise
 from planner.ltl.translate import translate
 from planner.policy import SwitchingPolicy
 from planner.scenario import load_scenario
@@ -59,10 +59,10 @@ def field(p: np.ndarray, a: np.ndarray) -> np.ndarray:
     return 0.4 * smooth + BIAS[np.asarray(a, dtype=int)]
 
 
-def prior() -> FitSettings:
+def prior() -> GPConfig:
     """The landing-error prior the runner would use for such a robot: the controller's bias
     known to 0.05 m, a field of std 0.125 m and length scale 2 m."""
-    return FitSettings(bias_mean=BIAS, bias_std=0.05, residual_std=0.05)
+    return GPConfig(bias_mean=BIAS, bias_std=0.05, residual_std=0.05)
 
 
 def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
@@ -71,7 +71,7 @@ def run_once(seed: int, args: argparse.Namespace, gp: LandingErrorGP) -> dict:
     rng = np.random.default_rng(seed)
     noise = TruncatedGaussianNoise()
     gp.reset()
-    settings = ResynthesisSettings(beta=args.beta, candidates=args.candidates)
+    settings = PlannerConfig(beta=args.beta, candidates=args.candidates)
     policy = SwitchingPolicy(settings.switching)
     pos, err, acts = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int)
     cell = start

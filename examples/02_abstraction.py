@@ -13,11 +13,11 @@ of random actions anywhere) and shows how the intervals shrink and the guarantee
 import numpy as np
 
 from planner import (
-    FitSettings,
+    GPConfig,
     GridWorld,
     LandingErrorGP,
+    PlannerConfig,
     ProductIMDP,
-    ResynthesisSettings,
     TruncatedGaussianNoise,
     cell_error_bounds,
     load_scenario,
@@ -28,7 +28,7 @@ from planner import (
 
 
 def product_of(scenario, grid, gp, noise):
-    bounds = cell_error_bounds(gp, grid, **ResynthesisSettings().interval_options())
+    bounds = cell_error_bounds(gp, grid, **PlannerConfig().interval_options())
     intervals = transition_intervals(bounds, grid, noise)
     model = grid.imdp_from_intervals(*intervals.coo(), initial=[scenario.start_cell])
     return ProductIMDP(model, translate(scenario.formula), scenario.state_rewards), intervals
@@ -39,7 +39,7 @@ def main() -> None:
     grid = GridWorld.from_scenario(sc)
     noise = TruncatedGaussianNoise(0.1, 0.2)  # sigma, bound [m] (the MJCF's defaults)
 
-    prior_settings = FitSettings(field_std=0.06, offset_std=0.25, bias_std=0.05, noise=noise)
+    prior_settings = GPConfig(field_std=0.06, offset_std=0.25, bias_std=0.05, noise=noise)
     prior, wide = product_of(sc, grid, LandingErrorGP(prior_settings), noise)
     p0 = satisfaction(prior).values[prior.initial]
     w0 = float(np.mean(wide.upper - wide.lower))

@@ -211,16 +211,16 @@ def run_config(
     """
     from hopper_sim.navigation.config import (
         ConfigError,
-        RunnerSettings,
+        NavigationConfig,
         parse_assignments,
         resolve_key,
     )
 
     try:
         if scenario is None:
-            config = RunnerSettings() if base is None else base
+            config = NavigationConfig() if base is None else base
         else:
-            config = RunnerSettings.from_scenario(scenario, base)
+            config = NavigationConfig.from_scenario(scenario, base)
         given = {key: v for key, (_, v) in flags.items() if v is not None}
         for key, value in given.items():
             config = config.override({key: value}, source=flags[key][0])

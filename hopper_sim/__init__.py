@@ -46,9 +46,9 @@ _EXPORTS: dict[str, str] = {
     "DEFAULT_CHECKPOINT": "hopper_sim.controller",
     # the environment and the loop
     "HopperGridEnv": "hopper_sim.navigation.environment",
-    "EnvSettings": "hopper_sim.navigation.environment",
+    "EnvConfig": "hopper_sim.navigation.environment",
     "NavigationRunner": "hopper_sim.navigation.runner",
-    "RunnerSettings": "hopper_sim.navigation.config",
+    "NavigationConfig": "hopper_sim.navigation.config",
     "default_config": "hopper_sim.navigation.config",
     "run_single": "hopper_sim.navigation.runner",
     # events and observers

@@ -29,7 +29,7 @@ _EXPORTS: dict[str, str] = {
     "World": "planner.world",
     "Region": "planner.world",
     "GridGeometry": "planner.geometry",
-    "RunnerParams": "planner.scenario",
+    "RunnerTableConfig": "planner.scenario",
     "load_scenario": "planner.scenario_file",
     "parse_scenario": "planner.scenario_file",
     # LTL and automata
@@ -55,18 +55,18 @@ _EXPORTS: dict[str, str] = {
     "write_model": "planner.imdp.io",
     # learned intervals
     "LandingErrorGP": "planner.gp.landing",
-    "FitSettings": "planner.gp.landing",
+    "GPConfig": "planner.gp.landing",
     "TruncatedGaussianNoise": "planner.intervals",
     "cell_error_bounds": "planner.intervals",
     "transition_intervals": "planner.intervals",
     # synthesis, policies, learning
     "resynthesise": "planner.learning",
     "Resynthesis": "planner.learning",
-    "ResynthesisSettings": "planner.config",
+    "PlannerConfig": "planner.config",
     "SwitchingPolicy": "planner.policy",
-    "SwitchingSettings": "planner.policy",
+    "SwitchingConfig": "planner.policy",
     "RobustQLearner": "planner.qlearning",
-    "QLearningSettings": "planner.qlearning",
+    "QLearningConfig": "planner.qlearning",
     "robust_q_iteration": "planner.qlearning",
     # errors
     "PlannerError": "planner.errors",

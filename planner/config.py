@@ -1,12 +1,12 @@
 """The planner's sections of a navigation run's configuration tree.
 
-:class:`RunConfig` (the run's schedule) and :class:`ResynthesisSettings` (the abstraction and
-synthesis, holding the :class:`planner.policy.SwitchingSettings` and
-:class:`planner.qlearning.QLearningSettings`); the tree itself
-(:class:`hopper_sim.navigation.config.RunnerSettings`) composes them with the simulation's. Each
+:class:`RunConfig` (the run's schedule) and :class:`PlannerConfig` (the abstraction and
+synthesis, holding the :class:`planner.policy.SwitchingConfig` and
+:class:`planner.qlearning.QLearningConfig`); the tree itself
+(:class:`hopper_sim.navigation.config.NavigationConfig`) composes them with the simulation's. Each
 default
 is defined once, in the dataclass field that holds it. A
-scenario's TOML ``[runner]`` table (:class:`planner.scenario.RunnerParams`) takes its defaults
+scenario's TOML ``[runner]`` table (:class:`planner.scenario.RunnerTableConfig`) takes its defaults
 from these fields and maps onto the tree (:data:`RUNNER_KEYS`).
 """
 
@@ -19,8 +19,8 @@ from typing import Any
 from planner.errors import IntervalError, PlannerError, PolicyError
 from planner.intervals import TruncatedGaussianNoise
 from planner.modes import Candidates
-from planner.policy import SwitchingSettings
-from planner.qlearning import QLearningSettings
+from planner.policy import SwitchingConfig
+from planner.qlearning import QLearningConfig
 from planner.tour import TOUR_MODES
 
 
@@ -59,13 +59,13 @@ class RunConfig:
 
 
 CANDIDATES: tuple[str, ...] = tuple(m.value for m in Candidates)
-"""The exploration targets of :class:`ResynthesisSettings` (``candidates``)."""
+"""The exploration targets of :class:`PlannerConfig` (``candidates``)."""
 
 
 @dataclass(frozen=True)
-class ResynthesisSettings:
+class PlannerConfig:
     """Settings of :func:`resynthesise` and of the plans it makes (the planner's part of the
-    run's configuration tree, :class:`hopper_sim.navigation.config.RunnerSettings`).
+    run's configuration tree, :class:`hopper_sim.navigation.config.NavigationConfig`).
 
     ``samples_per_axis``: sample points per cell and axis for the per-(cell, action) error
     bounds; ``delta``, ``horizon`` and ``beta``: see :mod:`planner.intervals` (``beta=None``
@@ -99,8 +99,8 @@ class ResynthesisSettings:
     q_tolerance: float = 1e-6
     candidates: str = "nonviolating"
     tour: str = "reward"
-    switching: SwitchingSettings = field(default_factory=SwitchingSettings)
-    q_learning: QLearningSettings = field(default_factory=QLearningSettings)
+    switching: SwitchingConfig = field(default_factory=SwitchingConfig)
+    q_learning: QLearningConfig = field(default_factory=QLearningConfig)
 
     def __post_init__(self) -> None:
         if self.candidates not in CANDIDATES:

@@ -177,8 +177,8 @@ def cell_error_bounds(
 ) -> CellErrorBounds:
     """Bounds of the mean landing error of every (cell, action) (see the module docstring).
 
-    The settings' defaults are those of :class:`planner.config.ResynthesisSettings`
-    (``cell_error_bounds(gp, grid, **ResynthesisSettings().interval_options())``). ``beta``
+    The settings' defaults are those of :class:`planner.config.PlannerConfig`
+    (``cell_error_bounds(gp, grid, **PlannerConfig().interval_options())``). ``beta``
     overrides the union-bound multiplier computed from ``delta``. Raises
     :class:`~planner.errors.IntervalError` if the predictor returns arrays of the wrong shape,
     non-finite values or a negative std, variation or residual.

@@ -34,7 +34,7 @@ import numpy as np
 
 from planner.automaton import RabinAutomaton
 from planner.config import CANDIDATES as CANDIDATES  # re-exported (defined there)
-from planner.config import ResynthesisSettings
+from planner.config import PlannerConfig
 from planner.errors import PolicyError
 from planner.gp.landing import FitReport, LandingErrorGP
 from planner.imdp import IMDP
@@ -110,7 +110,7 @@ def _check_inputs(
     actions: np.ndarray | None,
     reward: np.ndarray | None,
     learner: RobustQLearner | None,
-    s: ResynthesisSettings,
+    s: PlannerConfig,
 ) -> np.ndarray:
     """The executed actions (empty without hops), after checking the inputs agree."""
     if (reward is None) == (learner is None):
@@ -146,7 +146,7 @@ def _reward_to_collect(
 
 
 def _abstraction(
-    gp: LandingErrorGP, grid: GridWorld, s: ResynthesisSettings, initial_cell: int
+    gp: LandingErrorGP, grid: GridWorld, s: PlannerConfig, initial_cell: int
 ) -> tuple[CellErrorBounds, TransitionIntervals, IMDP]:
     """Per-(cell, action) error bounds of ``gp``, their transition intervals, the grid IMDP."""
     bounds = cell_error_bounds(
@@ -174,7 +174,7 @@ def resynthesise(
     initial_cell: int = 0,
     current_state: int | None = None,
     collected: np.ndarray | None = None,
-    settings: ResynthesisSettings | None = None,
+    settings: PlannerConfig | None = None,
     previous: Resynthesis | None = None,
     clock: Callable[[], float] = time.perf_counter,
 ) -> Resynthesis:
@@ -197,12 +197,12 @@ def resynthesise(
             collected (cells that pay once); their ``W`` is 0 in the product, the MEC choice,
             the tour and the Q-values (default: none). For a learner, set its ``collected``
             instead (it applies it to its learned rewards).
-        settings: see :class:`ResynthesisSettings`.
+        settings: see :class:`PlannerConfig`.
         previous: the last re-synthesis of this run; its Q-table warm-starts the known-reward
             Q-iteration (same grid and automaton, so the same product states).
         clock: time source for ``timings``.
     """
-    s = settings or ResynthesisSettings()
+    s = settings or PlannerConfig()
     actions = _check_inputs(gp, positions, actions, reward, learner, s)
     t0 = clock()
     fit = gp.fit(positions, errors, actions)
@@ -237,7 +237,7 @@ def replan_reward(
     reward: np.ndarray | None = None,
     learner: RobustQLearner | None = None,
     collected: np.ndarray | None = None,
-    settings: ResynthesisSettings | None = None,
+    settings: PlannerConfig | None = None,
 ) -> tuple[QSolution, RLActor, ComponentTour | None]:
     """Re-solve the reward plan of ``res`` after a collection, on the same abstraction.
 
@@ -248,7 +248,7 @@ def replan_reward(
     """
     if (reward is None) == (learner is None):
         raise PolicyError("give exactly one of reward (known W) and learner (unknown W)")
-    s = settings or ResynthesisSettings()
+    s = settings or PlannerConfig()
     product = res.product
     if reward is not None:
         w = _remaining(np.asarray(reward, dtype=np.float64), collected, product.base.n_states)

@@ -73,7 +73,7 @@ class Objective(StrEnum):
 
 
 class Candidates(StrEnum):
-    """The end components exploration steers to (:class:`planner.learning.ResynthesisSettings`)."""
+    """The end components exploration steers to (:class:`planner.learning.PlannerConfig`)."""
 
     NONVIOLATING = "nonviolating"
     """The pessimistic MECs of the nonviolating sub-model (the paper's exploration)."""

@@ -18,7 +18,7 @@ Switch: at a decision in state ``q``, exploration turns into goal reaching as so
 worst-case satisfaction probability of ``q`` *exceeds* ``P_sat`` and the satisfying sub-model
 allows an action in ``q``. That probability, ``p_switch``, is a statement about the IMDP and
 the goal-reaching plan *of that synthesis*; so, by default
-(``SwitchingSettings.keep_goal_plan``), the goal-reaching plan of the switch is kept for the
+(``SwitchingConfig.keep_goal_plan``), the goal-reaching plan of the switch is kept for the
 rest of the run: later re-syntheses replace the exploration and fallback plans and the
 satisfaction probabilities used for the next switch, but not the plan being followed, so the
 run is held to the guarantee it reported. The phase stays goal reaching while the current state
@@ -225,7 +225,7 @@ class GoalReachingPolicy:
 
 
 @dataclass(frozen=True)
-class SwitchingSettings:
+class SwitchingConfig:
     """``p_rl_explore`` = P_RL,ee; ``c``, ``eps`` of P_RL,gr = C exp(-eps m); ``p_sat``;
     ``keep_goal_plan``: follow the goal-reaching plan of the switch until the state leaves it
     (default) instead of the latest re-synthesis's (see the module docstring)."""
@@ -247,7 +247,7 @@ class SwitchingPolicy:
     and :meth:`decide` once per hop.
     """
 
-    def __init__(self, settings: SwitchingSettings, rl: RLActor | None = None) -> None:
+    def __init__(self, settings: SwitchingConfig, rl: RLActor | None = None) -> None:
         self.settings = settings
         self.rl = rl
         self.exploration: ExplorationPolicy | None = None

@@ -128,7 +128,7 @@ def robust_q_iteration(
     Args:
         model: the interval MDP.
         reward: ``(n_states,)`` reward of landing in each state.
-        discount: ``gamma`` in ``[0, 1)`` (a run's: :attr:`QLearningSettings.discount`).
+        discount: ``gamma`` in ``[0, 1)`` (a run's: :attr:`QLearningConfig.discount`).
         allowed: ``(n_states, n_actions)`` mask of the actions ``V`` may maximise over
             (a sub-model); default all enabled actions.
         initial: ``(n_states, n_actions)`` Q-table to warm-start from (``nan`` ignored).
@@ -222,7 +222,7 @@ class GreedyQ:
 
 
 @dataclass(frozen=True)
-class QLearningSettings:
+class QLearningConfig:
     """Settings of :class:`RobustQLearner`.
 
     ``discount`` gamma; ``learning_rate`` alpha of the asynchronous update; ``epsilon`` the
@@ -271,7 +271,7 @@ class RobustQLearner:
         n_cells: int,
         *,
         state_cell: np.ndarray | None = None,
-        settings: QLearningSettings | None = None,
+        settings: QLearningConfig | None = None,
     ) -> None:
         if n_states < 1 or n_actions < 1 or n_cells < 1:
             raise QTableError(f"sizes must be positive, got {n_states}, {n_actions}, {n_cells}")
@@ -284,7 +284,7 @@ class RobustQLearner:
             raise QTableError(f"state_cell must be an integer array of shape ({n_states},)")
         if sc.size and (sc.min() < 0 or sc.max() >= n_cells):
             raise QTableError(f"state_cell values must lie in [0, {n_cells})")
-        self.settings = settings or QLearningSettings()
+        self.settings = settings or QLearningConfig()
         self.state_cell = sc.astype(np.int64)
         self.n_cells = int(n_cells)
         self.q = np.zeros((n_states, n_actions))
@@ -482,7 +482,7 @@ class RobustQLearner:
         if st.shape != (4,):
             raise QTableError(f"{path}: field 'settings' must hold 4 numbers")
         try:
-            settings = QLearningSettings(*(float(x) for x in st))
+            settings = QLearningConfig(*(float(x) for x in st))
             learner = cls(q.shape[0], q.shape[1], rs.shape[0], state_cell=sc, settings=settings)
         except QTableError as exc:
             raise QTableError(f"{path}: {exc}") from exc

@@ -38,8 +38,8 @@ from planner.errors import (
     UnknownPropositionError,
 )
 from planner.ltl.parser import check_propositions, parse
-from planner.policy import SwitchingSettings
-from planner.qlearning import QLearningSettings
+from planner.policy import SwitchingConfig
+from planner.qlearning import QLearningConfig
 from planner.world import MAX_CELLS, Cell, Rect, Region, World
 
 __all__ = [
@@ -49,7 +49,7 @@ __all__ = [
     "Cell",
     "Rect",
     "Region",
-    "RunnerParams",
+    "RunnerTableConfig",
     "Scenario",
     "World",
     "ascii_map",
@@ -82,11 +82,11 @@ def _is_proposition(label: str) -> bool:
 
 
 @dataclass(frozen=True)
-class RunnerParams:
+class RunnerTableConfig:
     """The scenario's ``[runner]`` table (the paper's symbols in brackets).
 
     Each key maps onto a key of the run's configuration tree (:data:`planner.config.RUNNER_KEYS`,
-    :class:`hopper_sim.navigation.config.RunnerSettings`), whose field holds the default.
+    :class:`hopper_sim.navigation.config.NavigationConfig`), whose field holds the default.
 
     Attributes:
         batch_size: hops between two GP refits and re-syntheses.
@@ -104,10 +104,10 @@ class RunnerParams:
 
     batch_size: int = RunConfig.batch_size
     max_steps: int = RunConfig.max_steps
-    p_rl_ee: float = SwitchingSettings.p_rl_explore
-    c: float = SwitchingSettings.c
-    eps: float = SwitchingSettings.eps
-    discount: float = QLearningSettings.discount
+    p_rl_ee: float = SwitchingConfig.p_rl_explore
+    c: float = SwitchingConfig.c
+    eps: float = SwitchingConfig.eps
+    discount: float = QLearningConfig.discount
     runs: int = RunConfig.runs
     seed: int = RunConfig.seed
     window: int = RunConfig.window
@@ -166,10 +166,10 @@ class Scenario:
     rewards: Mapping[str, float] = field(default_factory=dict)
     hazard: str = "Haz"
     goal: str = "Goal"
-    p_sat: float = SwitchingSettings.p_sat
+    p_sat: float = SwitchingConfig.p_sat
     reward_known: bool = True
     collect: str = "once"
-    runner: RunnerParams = field(default_factory=RunnerParams)
+    runner: RunnerTableConfig = field(default_factory=RunnerTableConfig)
     description: str = ""
 
     def __post_init__(self) -> None:

@@ -29,7 +29,7 @@ Scenario files are TOML; :func:`load_scenario` reads one (or a shipped case stud
     [rewards]                       # per label, collected on landing
     A = 20.0
 
-    [runner]                        # all optional; see RunnerParams
+    [runner]                        # all optional; see RunnerTableConfig
     batch_size = 50
 
 :func:`parse_scenario` and :func:`scenario_from_dict` take the text and the parsed table.
@@ -55,7 +55,7 @@ from planner.errors import (
     ScenarioTypeError,
     UnknownKeyError,
 )
-from planner.scenario import DEFAULT_FORMULA, RunnerParams, Scenario
+from planner.scenario import DEFAULT_FORMULA, RunnerTableConfig, Scenario
 from planner.world import Region, World
 
 if sys.version_info >= (3, 11):
@@ -86,7 +86,7 @@ _TOP_KEYS = {
     "rewards",
     "runner",
 }
-_RUNNER_TYPES: dict[str, type] = {f.name: f.type for f in fields(RunnerParams)}  # type: ignore[misc]
+_RUNNER_TYPES: dict[str, type] = {f.name: f.type for f in fields(RunnerTableConfig)}  # type: ignore[misc]
 
 
 class _Reader:
@@ -217,7 +217,7 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
 
     runner_t = r.table(data, "runner", "runner", required=False)
     r.no_unknown(runner_t, _RUNNER_TYPES, "runner")
-    runner = RunnerParams(
+    runner = RunnerTableConfig(
         **{
             k: r.convert(v, f"runner.{k}", "int" if _RUNNER_TYPES[k] in (int, "int") else "float")
             for k, v in runner_t.items()

@@ -53,7 +53,7 @@ from planner.qlearning import GreedyQ, QSolution, RobustQLearner, robust_q_itera
 from planner.tour import ComponentTour
 
 if TYPE_CHECKING:
-    from planner.learning import ResynthesisSettings
+    from planner.learning import PlannerConfig
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ class Synthesis:
 
 def synthesise(
     product: ProductIMDP,
-    settings: ResynthesisSettings,
+    settings: PlannerConfig,
     *,
     start: int,
     uncertainty: np.ndarray,
@@ -294,7 +294,7 @@ def q_values(
     model: IMDP,
     reward: np.ndarray,
     allowed: np.ndarray,
-    settings: ResynthesisSettings,
+    settings: PlannerConfig,
     learner: RobustQLearner | None = None,
     initial: np.ndarray | None = None,
 ) -> tuple[QSolution, RLActor]:

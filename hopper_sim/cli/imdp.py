@@ -207,7 +207,7 @@ def scenario_product_model(name: str):
     from planner.imdp.grid import GridWorld
     from planner.imdp.product import ProductIMDP
     from planner.intervals import TruncatedGaussianNoise, cell_error_bounds, transition_intervals
-    from planner.learning import ResynthesisSettings
+    from planner.learning import PlannerConfig
     from planner.ltl.translate import translate
     from planner.scenario import load_scenario
 
@@ -215,7 +215,7 @@ def scenario_product_model(name: str):
     grid = GridWorld.from_scenario(sc)
     pp = HopperModel.load().perturbation
     # the prior's abstraction with 3 points per cell and axis (the export's, unchanged)
-    options = ResynthesisSettings(samples_per_axis=3).interval_options()
+    options = PlannerConfig(samples_per_axis=3).interval_options()
     bounds = cell_error_bounds(LandingErrorGP(), grid, **options)
     ti = transition_intervals(bounds, grid, TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound))
     model = grid.imdp_from_intervals(*ti.coo(), initial=[sc.start_cell])

@@ -133,7 +133,7 @@ def _sets(scenario: Any, items: list[str]) -> dict[str, str]:
         return {}  # (and the tree's modules stay unimported until the runs start)
     from hopper_sim.navigation.config import (
         ConfigError,
-        RunnerSettings,
+        NavigationConfig,
         parse_assignments,
         resolve_key,
     )
@@ -147,7 +147,7 @@ def _sets(scenario: Any, items: list[str]) -> dict[str, str]:
                     f"--set {key}: the sweep sets it (per cell: --cs, --epss; per run: "
                     "--runs, --seed)"
                 )
-        RunnerSettings.from_scenario(scenario).override(sets, text=True, source="--set")
+        NavigationConfig.from_scenario(scenario).override(sets, text=True, source="--set")
     except ConfigError as err:
         raise UsageError(str(err)) from None
     return sets

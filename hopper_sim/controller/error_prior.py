@@ -42,12 +42,12 @@ import numpy as np
 
 from hopper_sim.controller import LegAngleController
 from hopper_sim.controller.simulator import nominal_energy
-from hopper_sim.navigation.environment import EnvSettings
+from hopper_sim.navigation.environment import EnvConfig
 from hopper_sim.physics.batch import simulate_hops
 from hopper_sim.physics.hop import simulate_hop
 from hopper_sim.physics.model import HopperModel
 from planner._util.atomic import atomic_write
-from planner.gp import FitSettings, TruncatedGaussianNoise
+from planner.gp import GPConfig, TruncatedGaussianNoise
 from planner.imdp.grid import ACTION_OFFSETS
 
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "error_prior.json"
@@ -283,15 +283,15 @@ def error_prior(
     model: HopperModel,
     controller: LegAngleController,
     *,
-    terrain: bool = EnvSettings.terrain,
+    terrain: bool = EnvConfig.terrain,
     cell: float = 1.0,
     **overrides: object,
-) -> FitSettings:
+) -> GPConfig:
     """The prior of the landing-error model for this hopper and scene (module docstring):
     ``bias_mean`` and ``residual_std`` from the calibration, ``bias_std`` =
     :data:`BIAS_STD`, ``field_std = A J_max`` and ``offset_std = A_0 J_max`` (0 without
     terrain), ``lengthscale = ell`` and
-    the scene's landing noise; other :class:`~planner.gp.FitSettings` fields by name."""
+    the scene's landing noise; other :class:`~planner.gp.GPConfig` fields by name."""
     cal = load_calibration(model, controller, cell)
     pp = model.perturbation
     values: dict[str, object] = {
@@ -305,4 +305,4 @@ def error_prior(
         "noise": TruncatedGaussianNoise(pp.noise_sigma, pp.noise_bound),
     }
     values.update(overrides)
-    return FitSettings(**values)  # type: ignore[arg-type]
+    return GPConfig(**values)  # type: ignore[arg-type]

@@ -1,27 +1,27 @@
 """The configuration tree of a navigation run: every setting once, overridden by name.
 
-:class:`RunnerSettings` is the root; its sections are the dataclasses of the code that uses
+:class:`NavigationConfig` is the root; its sections are the dataclasses of the code that uses
 them, each default defined once, in its field::
 
     run                 planner.config.RunConfig             schedule: batch, cap, runs, seed
-    planner             planner.config.ResynthesisSettings   abstraction and synthesis
-    planner.switching   planner.policy.SwitchingSettings     P_RL,ee, C, eps, P_sat
-    planner.q_learning  planner.qlearning.QLearningSettings  gamma, alpha, epsilon, prior
-    env                 hopper_sim.navigation.environment.EnvSettings
+    planner             planner.config.PlannerConfig   abstraction and synthesis
+    planner.switching   planner.policy.SwitchingConfig     P_RL,ee, C, eps, P_sat
+    planner.q_learning  planner.qlearning.QLearningConfig  gamma, alpha, epsilon, prior
+    env                 hopper_sim.navigation.environment.EnvConfig
                                                              terrain, noise, thrust switches
-    gp                  planner.gp.FitSettings fields        changes to the derived GP prior
+    gp                  planner.gp.GPConfig fields        changes to the derived GP prior
     map_resolution, torch_threads                            the runner's own
 
 A key is the dotted path of a leaf (``planner.switching.c``); any unique dotted tail of it is
 accepted too (``switching.c``, ``c``). Build a tree with :func:`default_config` or from a
-scenario (:meth:`RunnerSettings.from_scenario`: its TOML ``[runner]`` table and ``p_sat``,
+scenario (:meth:`NavigationConfig.from_scenario`: its TOML ``[runner]`` table and ``p_sat``,
 mapped by :data:`planner.config.RUNNER_KEYS`), then change it with
 ``config.override({"switching.c": 0.75})`` (``hopnav run --set switching.c=0.75``). Unknown
 keys, wrong types and values out of range raise :class:`ConfigError`, one line naming the key.
 
 Not in the tree: the landing noise nu (``planner.noise``, ``gp.noise``; the MJCF's, set by the
 runner) and the GP prior's action tables (``gp.n_actions``, ``gp.coupled``); a whole
-:class:`~planner.gp.FitSettings` may still be given in Python as ``gp_prior``.
+:class:`~planner.gp.GPConfig` may still be given in Python as ``gp_prior``.
 """
 
 from __future__ import annotations
@@ -34,18 +34,18 @@ from dataclasses import dataclass, field, fields, is_dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
-from hopper_sim.navigation.environment import EnvSettings
+from hopper_sim.navigation.environment import EnvConfig
 from planner.config import P_SAT_KEY, RUNNER_KEYS, RunConfig
 from planner.errors import PlannerError, ScenarioError
-from planner.gp.landing import FitSettings
-from planner.learning import ResynthesisSettings
-from planner.scenario import RunnerParams, Scenario
+from planner.gp.landing import GPConfig
+from planner.learning import PlannerConfig
+from planner.scenario import RunnerTableConfig, Scenario
 
 #: leaves the runner derives (from the MJCF, the grid): never set by key
 DERIVED: frozenset[str] = frozenset({"planner.noise"})
-#: the fields of :class:`~planner.gp.FitSettings` that the ``gp`` section may change
+#: the fields of :class:`~planner.gp.GPConfig` that the ``gp`` section may change
 GP_KEYS: tuple[str, ...] = tuple(
-    f.name for f in fields(FitSettings) if f.name not in ("noise", "n_actions", "coupled")
+    f.name for f in fields(GPConfig) if f.name not in ("noise", "n_actions", "coupled")
 )
 #: field type of the ``gp`` section's leaves (tables may be set to one number)
 _GP_TYPES = {"max_data": int, "num_threads": int | None}
@@ -56,7 +56,7 @@ class ConfigError(ValueError):
 
 
 @dataclass(frozen=True)
-class RunnerSettings:
+class NavigationConfig:
     """The root of the run's configuration tree (see the module docstring).
 
     Attributes:
@@ -75,10 +75,10 @@ class RunnerSettings:
     """
 
     run: RunConfig = field(default_factory=RunConfig)
-    planner: ResynthesisSettings = field(default_factory=ResynthesisSettings)
-    env: EnvSettings = field(default_factory=EnvSettings)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
     gp: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
-    gp_prior: FitSettings | None = None
+    gp_prior: GPConfig | None = None
     map_resolution: int = 2
     torch_threads: int = 1
 
@@ -104,8 +104,8 @@ class RunnerSettings:
     # ------------------------------------------------------------------ building
     @classmethod
     def from_scenario(
-        cls, scenario: Scenario, base: RunnerSettings | None = None
-    ) -> RunnerSettings:
+        cls, scenario: Scenario, base: NavigationConfig | None = None
+    ) -> NavigationConfig:
         """``base`` (default: :func:`default_config`) with the scenario's ``[runner]`` table
         and ``p_sat`` (:data:`planner.config.RUNNER_KEYS`)."""
         base = cls() if base is None else base
@@ -119,10 +119,10 @@ class RunnerSettings:
         runner runs, recordings and figures show)."""
         return replace(scenario, runner=self.runner_params(), p_sat=self.planner.switching.p_sat)
 
-    def runner_params(self) -> RunnerParams:
+    def runner_params(self) -> RunnerTableConfig:
         """This tree's values of the scenario's ``[runner]`` keys."""
         leaves = self.leaves()
-        return RunnerParams(**{k: leaves[key] for k, key in RUNNER_KEYS.items()})
+        return RunnerTableConfig(**{k: leaves[key] for k, key in RUNNER_KEYS.items()})
 
     # ------------------------------------------------------------------ keys
     def leaves(self) -> dict[str, Any]:
@@ -135,7 +135,7 @@ class RunnerSettings:
 
     def override(
         self, changes: Mapping[str, Any], *, text: bool = False, source: str | None = None
-    ) -> RunnerSettings:
+    ) -> NavigationConfig:
         """A copy with ``changes`` (key -> value) applied, checked.
 
         Args:
@@ -166,13 +166,13 @@ class RunnerSettings:
         return config
 
 
-def default_config() -> RunnerSettings:
+def default_config() -> NavigationConfig:
     """The shipped defaults (each the default of its dataclass field)."""
-    return RunnerSettings()
+    return NavigationConfig()
 
 
-def _settings_from_kwargs(values: dict[str, Any]) -> RunnerSettings:
-    return RunnerSettings(**values)
+def _settings_from_kwargs(values: dict[str, Any]) -> NavigationConfig:
+    return NavigationConfig(**values)
 
 
 def _walk(node: Any, prefix: str) -> Iterator[tuple[str, Any]]:
@@ -231,7 +231,7 @@ def _field_type(full: str) -> Any:
     parts = full.split(".")
     if parts[0] == "gp":
         return _GP_TYPES.get(parts[1], float)
-    node: Any = RunnerSettings
+    node: Any = NavigationConfig
     for name in parts:
         hints = typing.get_type_hints(node)
         node = hints[name]
@@ -304,11 +304,11 @@ def _set(node: Any, path: list[str], value: Any) -> Any:
 
 
 def _check_gp(name: str, value: Any) -> Any:
-    FitSettings(**{name: value})  # the prior's own checks (on its defaults otherwise)
+    GPConfig(**{name: value})  # the prior's own checks (on its defaults otherwise)
     return value
 
 
-def _check_scenario_range(config: RunnerSettings) -> None:
+def _check_scenario_range(config: NavigationConfig) -> None:
     """The scenario's rules for its keys (they must hold for :meth:`apply_to`)."""
     try:
         config.runner_params()
@@ -322,7 +322,7 @@ def _check_scenario_range(config: RunnerSettings) -> None:
 
 def parse_assignments(items: Sequence[str], what: str = "--set") -> dict[str, str]:
     """``["key=value", ...]`` -> ``{key: value}`` (values as text, for
-    :meth:`RunnerSettings.override` with ``text=True``).
+    :meth:`NavigationConfig.override` with ``text=True``).
 
     Raises:
         ConfigError: an item without ``=`` or with an empty key, or a key given twice.
@@ -339,7 +339,7 @@ def parse_assignments(items: Sequence[str], what: str = "--set") -> dict[str, st
     return out
 
 
-def describe(config: RunnerSettings) -> list[tuple[str, str]]:
+def describe(config: NavigationConfig) -> list[tuple[str, str]]:
     """(key, value as text) of every leaf, in tree order (``gp`` keys: ``(prior)`` where
     unchanged)."""
     rows = []

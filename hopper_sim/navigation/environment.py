@@ -71,7 +71,7 @@ class EpisodeError(HopperSimError, RuntimeError):
 
 
 @dataclass(frozen=True)
-class EnvSettings:
+class EnvConfig:
     """Physics switches of the environment.
 
     Attributes:
@@ -153,7 +153,7 @@ class HopperGridEnv(_EnvBase):
         *,
         model: HopperModel | None = None,
         controller: LegAngleController | None = None,
-        settings: EnvSettings | None = None,
+        settings: EnvConfig | None = None,
         max_steps: int | None = None,
     ) -> None:
         if not isinstance(scenario, Scenario):
@@ -162,7 +162,7 @@ class HopperGridEnv(_EnvBase):
         self.max_steps = int(scenario.runner.max_steps if max_steps is None else max_steps)
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
-        self.settings = settings or EnvSettings()
+        self.settings = settings or EnvConfig()
         self.model = model or HopperModel.load()
         if controller is None:
             ckpt = load_checkpoint(expected_param_hash=self.model.param_hash())

@@ -64,7 +64,7 @@ from dataclasses import replace
 import numpy as np
 
 from hopper_sim.controller.error_prior import error_prior
-from hopper_sim.navigation.config import RunnerSettings
+from hopper_sim.navigation.config import NavigationConfig
 from hopper_sim.navigation.environment import HopperGridEnv
 from hopper_sim.navigation.episode import Episode, RunClock, hop_outcome
 from hopper_sim.navigation.events import (
@@ -98,7 +98,7 @@ class NavigationRunner:
         env: the environment (default: built from ``scenario`` and ``settings.env``; a given
             one must have ``settings.env``, and its settings are the default's ``env``).
         settings: the run's configuration tree, complete (default:
-            ``RunnerSettings.from_scenario(scenario)``, the shipped defaults with the
+            ``NavigationConfig.from_scenario(scenario)``, the shipped defaults with the
             scenario's ``[runner]`` table and ``p_sat``). Its ``run`` section and
             ``planner.switching.p_sat`` replace the scenario's ``[runner]`` table and ``p_sat``
             (:attr:`scenario` is the scenario as run), so build it from the scenario and
@@ -113,14 +113,14 @@ class NavigationRunner:
         scenario: Scenario,
         *,
         env: HopperGridEnv | None = None,
-        settings: RunnerSettings | None = None,
+        settings: NavigationConfig | None = None,
         observer: Observer | None = None,
         learner: RobustQLearner | None = None,
         clock: Callable[[], float] = time.perf_counter,
     ) -> None:
         if settings is None:
-            base = None if env is None else RunnerSettings(env=env.settings)
-            settings = RunnerSettings.from_scenario(scenario, base)
+            base = None if env is None else NavigationConfig(env=env.settings)
+            settings = NavigationConfig.from_scenario(scenario, base)
         elif env is not None and env.settings != settings.env:
             raise ValueError(
                 f"the environment's settings {env.settings} differ from settings.env {settings.env}"
@@ -401,9 +401,9 @@ def run_single(
     scenario: Scenario, seed: int, run_index: int = 0, overrides: dict | None = None
 ) -> RunEnd:
     """One run of ``scenario`` with its settings (``overrides``: changes by key, as text,
-    :meth:`~hopper_sim.navigation.config.RunnerSettings.override`) and no observer (picklable, also
-    as a :func:`functools.partial`, for worker processes)."""
-    settings = RunnerSettings.from_scenario(scenario)
+    :meth:`~hopper_sim.navigation.config.NavigationConfig.override`) and no observer
+    (picklable, also as a :func:`functools.partial`, for worker processes)."""
+    settings = NavigationConfig.from_scenario(scenario)
     if overrides:
         settings = settings.override(overrides, text=True, source="--set")
     return NavigationRunner(scenario, settings=settings).run(seed, run_index=run_index)

@@ -11,7 +11,7 @@ the paper's 50-inducing-point model (``benchmarks/gp_update.py``).
 
 from __future__ import annotations
 
-from planner.gp.landing import FitReport, FitSettings, LandingErrorGP
+from planner.gp.landing import FitReport, GPConfig, LandingErrorGP
 from planner.gp.noise import ResidualNoise, TruncatedGaussianNoise
 from planner.gp.protocol import ErrorPredictor
 from planner.gp.sgpr import SparseGP, SparsePosterior, rbf_sparse_gp
@@ -19,7 +19,7 @@ from planner.gp.sgpr import SparseGP, SparsePosterior, rbf_sparse_gp
 __all__ = [
     "ErrorPredictor",
     "FitReport",
-    "FitSettings",
+    "GPConfig",
     "LandingErrorGP",
     "ResidualNoise",
     "SparseGP",

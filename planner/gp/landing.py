@@ -95,7 +95,7 @@ def _default_coupling() -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FitSettings:
+class GPConfig:
     """The prior of :class:`LandingErrorGP` (see the module docstring; lengths in metres).
 
     ``bias_mean`` (prior mean of ``c_{a,d}``) and ``residual_std`` (prior guess of
@@ -126,46 +126,46 @@ class FitSettings:
     def __post_init__(self) -> None:
         if int(self.n_actions) < 1 or int(self.max_data) < 1:
             raise GPDataError(
-                f"FitSettings needs n_actions >= 1 and max_data >= 1, got {self.n_actions}, "
+                f"GPConfig needs n_actions >= 1 and max_data >= 1, got {self.n_actions}, "
                 f"{self.max_data}"
             )
         if self.num_threads is not None and int(self.num_threads) < 1:
-            raise GPDataError(f"FitSettings.num_threads must be >= 1, got {self.num_threads}")
+            raise GPDataError(f"GPConfig.num_threads must be >= 1, got {self.num_threads}")
         value = float(self.lengthscale)
         if not np.isfinite(value) or value <= 0.0:
-            raise GPDataError(f"FitSettings.lengthscale must be positive and finite, got {value}")
+            raise GPDataError(f"GPConfig.lengthscale must be positive and finite, got {value}")
         for name in ("field_std", "offset_std", "bias_std", "residual_count"):
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0.0:
-                raise GPDataError(f"FitSettings.{name} must be finite and >= 0, got {value}")
+                raise GPDataError(f"GPConfig.{name} must be finite and >= 0, got {value}")
         for name, nonneg in (("bias_mean", False), ("residual_std", True), ("scale", True)):
             raw = np.asarray(getattr(self, name), dtype=np.float64)
             try:
                 table = np.broadcast_to(raw, (int(self.n_actions), 2))
             except ValueError as exc:
                 raise GPDataError(
-                    f"FitSettings.{name} must be a scalar or ({self.n_actions}, 2), got shape "
+                    f"GPConfig.{name} must be a scalar or ({self.n_actions}, 2), got shape "
                     f"{raw.shape}"
                 ) from exc
             if not np.isfinite(table).all() or (nonneg and (table < 0).any()):
                 what = "finite and >= 0" if nonneg else "finite"
-                raise GPDataError(f"FitSettings.{name} must be {what}")
+                raise GPDataError(f"GPConfig.{name} must be {what}")
             if name == "scale" and ((table <= 0.0) | (table > 1.0)).any():
-                raise GPDataError("FitSettings.scale must lie in (0, 1]")
+                raise GPDataError("GPConfig.scale must lie in (0, 1]")
             object.__setattr__(self, name, tuple(tuple(float(v) for v in r) for r in table))
         if not 0.0 <= float(self.field_correlation) <= 1.0:
             raise GPDataError(
-                f"FitSettings.field_correlation must lie in [0, 1], got {self.field_correlation}"
+                f"GPConfig.field_correlation must lie in [0, 1], got {self.field_correlation}"
             )
         if self.coupled is None:
             if int(self.n_actions) != N_ACTIONS:
-                raise GPDataError(f"FitSettings.coupled must be given for {self.n_actions} actions")
+                raise GPDataError(f"GPConfig.coupled must be given for {self.n_actions} actions")
             mask = _default_coupling()
         else:
             mask = np.asarray(self.coupled, dtype=bool)
             if mask.shape != (int(self.n_actions), 2):
                 raise GPDataError(
-                    f"FitSettings.coupled must have shape ({self.n_actions}, 2), got {mask.shape}"
+                    f"GPConfig.coupled must have shape ({self.n_actions}, 2), got {mask.shape}"
                 )
         object.__setattr__(self, "coupled", tuple(tuple(bool(v) for v in r) for r in mask))
 
@@ -252,11 +252,11 @@ class LandingErrorGP:
     :class:`~planner.gp.protocol.ErrorPredictor` (see the module docstring).
 
     Args:
-        settings: the prior (see :class:`FitSettings`).
+        settings: the prior (see :class:`GPConfig`).
     """
 
-    def __init__(self, settings: FitSettings | None = None) -> None:
-        self.settings = settings or FitSettings()
+    def __init__(self, settings: GPConfig | None = None) -> None:
+        self.settings = settings or GPConfig()
         self.reset()
 
     @property

@@ -6,7 +6,7 @@ from scipy.stats import norm, truncnorm
 
 from planner.audit import audit_counts
 from planner.errors import IntervalError
-from planner.gp import FitSettings, LandingErrorGP
+from planner.gp import GPConfig, LandingErrorGP
 from planner.imdp.grid import GridWorld
 from planner.intervals import (
     CellErrorBounds,
@@ -291,6 +291,6 @@ def test_empirical_frequencies_lie_in_the_intervals(fitted_gp):
 
 
 def test_fitted_model_settings_shape_the_prior():
-    wide = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.5)), GRID, **BOUNDS)
-    narrow = cell_error_bounds(LandingErrorGP(FitSettings(bias_std=0.05)), GRID, **BOUNDS)
+    wide = cell_error_bounds(LandingErrorGP(GPConfig(bias_std=0.5)), GRID, **BOUNDS)
+    narrow = cell_error_bounds(LandingErrorGP(GPConfig(bias_std=0.05)), GRID, **BOUNDS)
     assert (wide.upper > narrow.upper).all() and (wide.lower < narrow.lower).all()

@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 
 from planner.errors import PolicyError
-from planner.gp import FitSettings, LandingErrorGP
+from planner.gp import GPConfig, LandingErrorGP
 from planner.imdp import IMDP
 from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
-from planner.learning import ResynthesisSettings, replan_reward, resynthesise
+from planner.learning import PlannerConfig, replan_reward, resynthesise
 from planner.modes import Phase
-from planner.policy import SwitchingPolicy, SwitchingSettings
-from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
+from planner.policy import SwitchingConfig, SwitchingPolicy
+from planner.qlearning import GreedyQ, QLearningConfig, RobustQLearner
 from planner.synthesis import frontier_strategy
 from tests.planner.conftest import smooth_error
 from tests.planner.imdp.helpers import until_automaton
@@ -34,9 +34,9 @@ def _run(seed: int, learner: RobustQLearner | None = None, cap: int = 60, batch:
     grid, w = _world()
     rng = np.random.default_rng(seed)
     noise = TruncatedGaussianNoise()
-    gp = LandingErrorGP(FitSettings(bias_std=0.1))
-    settings = ResynthesisSettings(beta=3.0, q_tolerance=1e-4)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.3, c=0.3, eps=0.02))
+    gp = LandingErrorGP(GPConfig(bias_std=0.1))
+    settings = PlannerConfig(beta=3.0, q_tolerance=1e-4)
+    policy = SwitchingPolicy(SwitchingConfig(p_rl_explore=0.3, c=0.3, eps=0.02))
     pos, err, acts = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int)
     xy = np.array([1.5, 1.5])
     cell = int(grid.locate(xy))
@@ -86,7 +86,7 @@ def test_unknown_reward_run_learns_rewards_of_visited_cells():
         8,
         N * N + 1,
         state_cell=np.arange(product_states) // until_automaton().n_states,
-        settings=QLearningSettings(epsilon=0.2, prior_reward=1.0),
+        settings=QLearningConfig(epsilon=0.2, prior_reward=1.0),
     )
     events, *_ = _run(1, learner=learner)
     visited = np.unique([e[3] for e in events])
@@ -100,7 +100,7 @@ def test_prior_start_in_a_corner_falls_back():
     r = resynthesise(gp, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)), reward=w)
     corner = r.product.entry_state(0)
     assert not r.exploration.allowed[corner].any()  # every hop may leave the world
-    policy = SwitchingPolicy(SwitchingSettings(), r.rl)
+    policy = SwitchingPolicy(SwitchingConfig(), r.rl)
     policy.resynthesise(r.exploration, r.goal, r.satisfaction.values, r.fallback)
     d = policy.decide(corner, np.random.default_rng(0))
     assert d.phase == Phase.FALLBACK and grid.enabled[0, d.action]
@@ -111,7 +111,7 @@ def test_prior_start_in_a_corner_falls_back():
         resynthesise(gp, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)))
     with pytest.raises(PolicyError, match="3 hops given without their executed actions"):
         resynthesise(gp, grid, until_automaton(), np.ones((3, 2)), np.zeros((3, 2)), reward=w)
-    other = LandingErrorGP(FitSettings(noise=TruncatedGaussianNoise(0.2, 0.4)))
+    other = LandingErrorGP(GPConfig(noise=TruncatedGaussianNoise(0.2, 0.4)))
     with pytest.raises(PolicyError, match="landing noise"):
         resynthesise(other, grid, until_automaton(), np.zeros((0, 2)), np.zeros((0, 2)), reward=w)
 
@@ -133,18 +133,18 @@ def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
 def test_exploration_candidates_setting():
     grid, w = _world()
     empty = np.zeros((0, 2))
-    settings = ResynthesisSettings(beta=3.0, candidates="nonviolating")
+    settings = PlannerConfig(beta=3.0, candidates="nonviolating")
     r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
                      initial_cell=9, settings=settings)  # fmt: skip
     assert r.mec is not None
     assert r.nonviolating.states[r.mec.component.states].all()
-    accepting = ResynthesisSettings(beta=3.0, candidates="accepting")
+    accepting = PlannerConfig(beta=3.0, candidates="accepting")
     r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
                       initial_cell=9, settings=accepting)  # fmt: skip
     assert r2.mec is not None
     assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
     with pytest.raises(PolicyError, match="candidates"):
-        ResynthesisSettings(candidates="all")
+        PlannerConfig(candidates="all")
 
 
 def test_fallback_never_aims_at_a_hazard_when_another_hop_does_not():
@@ -187,9 +187,9 @@ def test_default_exploration_tours_the_best_nonviolating_component():
     grid, w = _world()
     empty = np.zeros((0, 2))
     # a narrow prior (the error well known): the start's component is surely reachable
-    narrow = FitSettings(bias_std=0.02, field_std=0.02, residual_std=0.02)
+    narrow = GPConfig(bias_std=0.02, field_std=0.02, residual_std=0.02)
     r = resynthesise(LandingErrorGP(narrow), grid, until_automaton(), empty, empty, reward=w,
-                     initial_cell=9, settings=ResynthesisSettings(beta=0.5))  # fmt: skip
+                     initial_cell=9, settings=PlannerConfig(beta=0.5))  # fmt: skip
     assert r.mec is not None and r.tour is not None and r.mec.probability == 1.0
     start = r.product.entry_state(9)
     comp = r.mec.component
@@ -204,7 +204,7 @@ def test_default_exploration_tours_the_best_nonviolating_component():
 def test_collected_cells_are_worth_nothing_to_the_plan():
     grid, w = _world()
     empty = np.zeros((0, 2))
-    settings = ResynthesisSettings(beta=0.5, q_tolerance=1e-9)
+    settings = PlannerConfig(beta=0.5, q_tolerance=1e-9)
     r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
                      initial_cell=9, settings=settings)  # fmt: skip
     assert r.q.values.max() > 0  # tight intervals: the rewards count
@@ -230,7 +230,7 @@ def test_no_reward_is_planned_after_the_run_ends():
     grid, w = _world()
     empty = np.zeros((0, 2))
     r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                     initial_cell=9, settings=ResynthesisSettings(beta=0.5))  # fmt: skip
+                     initial_cell=9, settings=PlannerConfig(beta=0.5))  # fmt: skip
     p = r.product
     table = p.automaton.transitions
     sink = (table == np.arange(p.n_q)[:, None]).all(axis=1)[p.automaton_state]

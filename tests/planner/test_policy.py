@@ -5,8 +5,8 @@ import pytest
 
 from planner.errors import PolicyError
 from planner.modes import Phase, Source
-from planner.policy import PhasePlan, SwitchingPolicy, SwitchingSettings
-from planner.qlearning import GreedyQ, QLearningSettings, RobustQLearner
+from planner.policy import PhasePlan, SwitchingConfig, SwitchingPolicy
+from planner.qlearning import GreedyQ, QLearningConfig, RobustQLearner
 from planner.tour import ComponentTour
 
 N, K = 30, 8
@@ -22,9 +22,9 @@ def _plan(rng: np.random.Generator, density: float) -> PhasePlan:
 
 def _policy(seed: int = 0, **settings) -> tuple[SwitchingPolicy, PhasePlan, PhasePlan]:
     rng = np.random.default_rng(seed)
-    learner = RobustQLearner(N, K, N, settings=QLearningSettings(epsilon=0.3))
+    learner = RobustQLearner(N, K, N, settings=QLearningConfig(epsilon=0.3))
     learner.q[:] = rng.normal(size=(N, K))
-    policy = SwitchingPolicy(SwitchingSettings(**settings), learner)
+    policy = SwitchingPolicy(SwitchingConfig(**settings), learner)
     explore, goal = _plan(rng, 0.6), _plan(rng, 0.3)
     policy.resynthesise(explore, goal, rng.uniform(0.0, 1.0, N))
     return policy, explore, goal
@@ -146,14 +146,14 @@ def test_bad_plans_and_calls():
     with pytest.raises(PolicyError, match="state 1: LTL action 1"):
         PhasePlan(allowed, np.array([0, 1, -1]))
     with pytest.raises(PolicyError, match="p_rl_explore"):
-        SwitchingSettings(p_rl_explore=1.5)
+        SwitchingConfig(p_rl_explore=1.5)
     masked = PhasePlan.masked(allowed, np.array([0, 1, 7]))
     assert masked.ltl_action.tolist() == [0, -1, -1]
-    policy = SwitchingPolicy(SwitchingSettings(), RobustQLearner(3, 2, 3))
+    policy = SwitchingPolicy(SwitchingConfig(), RobustQLearner(3, 2, 3))
     with pytest.raises(PolicyError, match="before resynthesise"):
         policy.decide(0, np.random.default_rng(0))
     with pytest.raises(PolicyError, match="no RL actor"):
-        SwitchingPolicy(SwitchingSettings()).resynthesise(
+        SwitchingPolicy(SwitchingConfig()).resynthesise(
             PhasePlan(allowed, np.zeros(3, dtype=int)),
             PhasePlan(allowed, np.zeros(3, dtype=int)),
             np.zeros(3),
@@ -170,7 +170,7 @@ def test_rl_ties_take_the_ltl_action():
     # must not pull the RL action to the lowest-index action
     rng = np.random.default_rng(0)
     explore, goal = _plan(rng, 0.6), _plan(rng, 0.3)
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=1.0), GreedyQ(np.zeros((N, K))))
+    policy = SwitchingPolicy(SwitchingConfig(p_rl_explore=1.0), GreedyQ(np.zeros((N, K))))
     policy.resynthesise(explore, goal, np.zeros(N))
     for s in np.flatnonzero(explore.ltl_action >= 0):
         d = policy.decide(int(s), rng)
@@ -188,7 +188,7 @@ def test_exploration_follows_the_tour_inside_its_component_and_remembers_visits(
         model, comp, model.enabled, np.arange(n), np.zeros(n), np.zeros(n), "coverage"
     )
     static = PhasePlan(model.enabled.copy(), np.argmax(model.enabled, axis=1))  # lowest index
-    policy = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
+    policy = SwitchingPolicy(SwitchingConfig(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
     policy.resynthesise(static, static, np.zeros(n), tour=tour)
     rng = np.random.default_rng(0)
     s, seen = 12, {12}
@@ -204,7 +204,7 @@ def test_exploration_follows_the_tour_inside_its_component_and_remembers_visits(
     policy.reset()
     assert (policy.last_visit == -1).all()
     # without the tour the static plan shuttles between two states
-    plain = SwitchingPolicy(SwitchingSettings(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
+    plain = SwitchingPolicy(SwitchingConfig(p_rl_explore=0.0), GreedyQ(np.zeros((n, 4))))
     plain.resynthesise(static, static, np.zeros(n))
     s, seen = 12, {12}
     for _ in range(40):

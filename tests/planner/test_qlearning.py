@@ -12,7 +12,7 @@ from planner.imdp.solve import ReachAvoid
 from planner.qlearning import (
     SEAL_KIND,
     GreedyQ,
-    QLearningSettings,
+    QLearningConfig,
     RobustQLearner,
     greedy_action,
     robust_q_iteration,
@@ -109,7 +109,7 @@ def test_online_q_learning_converges_on_a_deterministic_ring():
     w = np.array([0.0, 1.0, 3.0])
     exact = robust_q_iteration(model, w, discount=0.8, tolerance=1e-12)
     learner = RobustQLearner(
-        3, 2, 3, settings=QLearningSettings(discount=0.8, epsilon=0.3, prior_reward=10.0)
+        3, 2, 3, settings=QLearningConfig(discount=0.8, epsilon=0.3, prior_reward=10.0)
     )
     rng = np.random.default_rng(1)
     s = 0
@@ -125,7 +125,7 @@ def test_online_q_learning_converges_on_a_deterministic_ring():
 
 def test_unvisited_cells_carry_the_prior_and_sweeps_use_learned_rewards():
     model = _ring()
-    learner = RobustQLearner(3, 2, 3, settings=QLearningSettings(discount=0.5, prior_reward=2.0))
+    learner = RobustQLearner(3, 2, 3, settings=QLearningConfig(discount=0.5, prior_reward=2.0))
     learner.observe_reward(1, 4.0)
     learner.observe_reward(1, 2.0)
     np.testing.assert_allclose(learner.cell_reward(), [2.0, 3.0, 2.0])
@@ -142,7 +142,7 @@ def test_product_states_share_cell_rewards():
 
 
 def test_same_seed_same_actions():
-    learner = RobustQLearner(3, 4, 3, settings=QLearningSettings(epsilon=0.5))
+    learner = RobustQLearner(3, 4, 3, settings=QLearningConfig(epsilon=0.5))
     learner.q[:] = np.arange(12).reshape(3, 4)
     allowed = np.array([True, False, True, True])
     runs = [
@@ -156,7 +156,7 @@ def test_same_seed_same_actions():
 
 def test_persistence_round_trip(tmp_path):
     learner = RobustQLearner(
-        4, 2, 2, state_cell=np.array([0, 1, 0, 1]), settings=QLearningSettings(epsilon=0.2)
+        4, 2, 2, state_cell=np.array([0, 1, 0, 1]), settings=QLearningConfig(epsilon=0.2)
     )
     learner.q[:] = np.random.default_rng(2).normal(size=(4, 2))
     learner.observe_reward(3, 5.0)
@@ -225,7 +225,7 @@ def test_truncated_and_incomplete_files(tmp_path):
 
 def test_bad_inputs():
     with pytest.raises(QTableError, match="discount"):
-        QLearningSettings(discount=1.0)
+        QLearningConfig(discount=1.0)
     learner = RobustQLearner(3, 2, 3)
     with pytest.raises(QTableError, match="model has 3 states and 3 actions, the learner 3 and 2"):
         learner.update(_random_model(np.random.default_rng(0), 3, 3), 0, 0, 1, 0.0)
@@ -275,13 +275,13 @@ def test_greedy_ties_go_to_the_preferred_action_else_to_the_generator():
     flat = np.zeros(5)
     assert greedy_action(flat, allowed, prefer=3) == 3
     assert GreedyQ(np.zeros((1, 5))).act(0, allowed, np.random.default_rng(0), prefer=2) == 2
-    learner = RobustQLearner(1, 5, 1, settings=QLearningSettings(epsilon=0.0))
+    learner = RobustQLearner(1, 5, 1, settings=QLearningConfig(epsilon=0.0))
     assert learner.act(0, allowed, np.random.default_rng(0), prefer=3) == 3
 
 
 def test_collected_cells_count_zero_in_the_plan_but_keep_their_learned_reward():
     model = _ring()
-    learner = RobustQLearner(3, 2, 3, settings=QLearningSettings(discount=0.5, prior_reward=0.0))
+    learner = RobustQLearner(3, 2, 3, settings=QLearningConfig(discount=0.5, prior_reward=0.0))
     learner.observe_reward(2, 4.0)
     before = learner.sweep(model, tolerance=1e-12).values.copy()
     learner.collected[2] = True

@@ -22,7 +22,7 @@ from planner.errors import (
 from planner.scenario import (
     SHIPPED_SCENARIOS,
     Region,
-    RunnerParams,
+    RunnerTableConfig,
     Scenario,
     World,
     load_scenario,
@@ -46,8 +46,8 @@ def test_base_scenario_derived_arrays():
     letters = s.state_letters(["Goal", "Haz"])
     assert letters[3 * 3 + 2] == 0b01 and letters[2 * 3 + 2] == 0b10 and letters[-1] == 0b10
     assert letters[0] == 0
-    # runner defaults from RunnerParams
-    assert s.runner == RunnerParams()
+    # runner defaults from RunnerTableConfig
+    assert s.runner == RunnerTableConfig()
     assert s.p_sat == 0.65 and s.reward_known
 
 

@@ -16,7 +16,7 @@ from hopper_sim.navigation.config import (
     DERIVED,
     GP_KEYS,
     ConfigError,
-    RunnerSettings,
+    NavigationConfig,
     default_config,
     describe,
     parse_assignments,
@@ -25,7 +25,7 @@ from hopper_sim.navigation.config import (
 from hopper_sim.navigation.environment import HopperGridEnv
 from hopper_sim.navigation.runner import NavigationRunner, run_single
 from planner.errors import ScenarioError
-from planner.gp.landing import FitSettings, LandingErrorGP
+from planner.gp.landing import GPConfig, LandingErrorGP
 from planner.policy import SwitchingPolicy
 from planner.scenario import load_scenario, parse_scenario
 
@@ -57,16 +57,16 @@ def _owners() -> dict[str, tuple[str, str]]:
         for f in dataclasses.fields(cls):
             kind = hints[f.name]
             if f"{prefix}{f.name}" in (*DERIVED, "gp", "gp_prior"):
-                continue  # the MJCF's noise; the gp section is FitSettings' (below)
+                continue  # the MJCF's noise; the gp section is GPConfig' (below)
             if dataclasses.is_dataclass(kind):
                 walk(kind, f"{prefix}{f.name}.")
             else:
                 source = Path(sys.modules[cls.__module__].__file__).relative_to(ROOT)
                 out[f"{prefix}{f.name}"] = (str(source), cls.__name__)
 
-    walk(RunnerSettings, "")
-    gp_file = str(Path(sys.modules[FitSettings.__module__].__file__).relative_to(ROOT))
-    out.update({f"gp.{name}": (gp_file, "FitSettings") for name in GP_KEYS})
+    walk(NavigationConfig, "")
+    gp_file = str(Path(sys.modules[GPConfig.__module__].__file__).relative_to(ROOT))
+    out.update({f"gp.{name}": (gp_file, "GPConfig") for name in GP_KEYS})
     return out
 
 
@@ -256,7 +256,7 @@ def _consumer_value(key: str, seen: dict) -> object:
 
 @pytest.mark.parametrize("key", sorted(default_config().leaves()))
 def test_every_setting_reaches_its_consumer(key, scenario_c, env_c, prior_synthesis, monkeypatch):
-    base = RunnerSettings.from_scenario(scenario_c)
+    base = NavigationConfig.from_scenario(scenario_c)
     default = base.leaves()[key]
     if key.startswith("gp."):
         default = _consumer_value(key, _observe(scenario_c, base, env_c, monkeypatch))
@@ -275,7 +275,7 @@ def test_every_setting_reaches_its_consumer(key, scenario_c, env_c, prior_synthe
 
 
 def test_the_schedule_and_discount_drive_a_real_run(scenario_c, env_c):
-    settings = RunnerSettings.from_scenario(scenario_c).override(
+    settings = NavigationConfig.from_scenario(scenario_c).override(
         {"run.max_steps": 5, "run.batch_size": 2, "run.window": 3, "discount": 0.5}
     )
     runner = NavigationRunner(scenario_c, env=env_c, settings=settings)
@@ -290,7 +290,7 @@ def test_the_schedule_and_discount_drive_a_real_run(scenario_c, env_c):
 
 
 def test_runs_and_seed_drive_run_many(scenario_c, env_c, monkeypatch):
-    settings = RunnerSettings.from_scenario(scenario_c).override({"runs": 3, "run.seed": 7})
+    settings = NavigationConfig.from_scenario(scenario_c).override({"runs": 3, "run.seed": 7})
     runner = NavigationRunner(scenario_c, env=env_c, settings=settings)
     seeds = []
     monkeypatch.setattr(runner, "run", lambda seed, run_index=0: seeds.append(seed))
@@ -299,10 +299,10 @@ def test_runs_and_seed_drive_run_many(scenario_c, env_c, monkeypatch):
 
 
 def test_python_callers_set_p_sat_once():
-    from planner.learning import ResynthesisSettings
-    from planner.policy import SwitchingSettings
+    from planner.learning import PlannerConfig
+    from planner.policy import SwitchingConfig
 
-    s = ResynthesisSettings(switching=SwitchingSettings(p_sat=0.8))
+    s = PlannerConfig(switching=SwitchingConfig(p_sat=0.8))
     assert s.p_sat == 0.8 and SwitchingPolicy(s.switching).settings.p_sat == 0.8
     c = default_config().override({"p_sat": 0.8})
     assert c.planner.p_sat == c.planner.switching.p_sat == 0.8
@@ -313,14 +313,14 @@ def test_python_callers_set_p_sat_once():
 
 def test_default_and_scenario_trees(scenario_c):
     d = default_config()
-    assert d == RunnerSettings() and d.planner.p_sat == 0.65 and d.planner.discount == 0.95
-    c = RunnerSettings.from_scenario(scenario_c)
+    assert d == NavigationConfig() and d.planner.p_sat == 0.65 and d.planner.discount == 0.95
+    c = NavigationConfig.from_scenario(scenario_c)
     assert c.run.runs == scenario_c.runner.runs == 10
     assert c.apply_to(scenario_c) == scenario_c
     text = (ROOT / "planner" / "scenarios" / "a.toml").read_text()
     text = text.replace("c = 0.5", "c = 0.3").replace("p_sat = 0.65", "p_sat = 0.7")
     sc = parse_scenario(text)
-    t = RunnerSettings.from_scenario(sc)
+    t = NavigationConfig.from_scenario(sc)
     assert t.planner.switching.c == 0.3 and t.planner.switching.p_sat == 0.7
 
 
@@ -355,7 +355,7 @@ def test_override_by_full_key_or_unique_tail():
         ({"tour": "x"}, False, "planner.tour: tour must be one of"),
         ({"beta": -1.0}, False, "planner.beta: beta must be finite and >= 0"),
         ({"delta": float("nan")}, False, "planner.delta: must be a finite number"),
-        ({"gp.lengthscale": -1.0}, False, "gp.lengthscale: FitSettings.lengthscale"),
+        ({"gp.lengthscale": -1.0}, False, "gp.lengthscale: GPConfig.lengthscale"),
         ({"map_resolution": 0}, False, "map_resolution: must be a whole number >= 1"),
         ({"c": 0.1, "switching.c": 0.2}, False, "planner.switching.c: given twice"),
     ],
@@ -391,7 +391,7 @@ def test_toml_runner_errors_name_the_key_line_and_file(tmp_path):
 
 
 def test_a_given_environment_must_match_the_settings(scenario_c, env_c):
-    settings = RunnerSettings.from_scenario(scenario_c).override({"env.thrust": False})
+    settings = NavigationConfig.from_scenario(scenario_c).override({"env.thrust": False})
     with pytest.raises(ValueError, match=r"settings\.env"):
         NavigationRunner(scenario_c, env=env_c, settings=settings)
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hopper_sim.navigation.events import Observer
-from hopper_sim.navigation.runner import NavigationRunner, RunnerSettings
+from hopper_sim.navigation.runner import NavigationConfig, NavigationRunner
 from planner.scenario import load_scenario, parse_scenario
 from tests.planner import ltl_oracle
 from tests.planner.test_verdict import ISSUE, random_formulas
@@ -52,7 +52,7 @@ def test_patrol_cycles_through_both_regions():
     # shows the cycling (with the terrain the run first learns the push: about 160 hops on
     # seed 0; benchmarks/missions.py runs the gallery as shipped)
     sc = load_scenario(GALLERY / "patrol.toml").with_runner(max_steps=90, window=60)
-    end, _ = run(sc, settings=RunnerSettings.from_scenario(sc).override({"env.terrain": False}))
+    end, _ = run(sc, settings=NavigationConfig.from_scenario(sc).override({"env.terrain": False}))
     assert end.outcome == "satisfying", end.reason
     m = end.mission
     assert m.in_accepting_component and m.window == 60

@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from hopper_sim.navigation.environment import EnvSettings, EpisodeError, HopperGridEnv
+from hopper_sim.navigation.environment import EnvConfig, EpisodeError, HopperGridEnv
 from hopper_sim.navigation.events import HopEvent, Observer
 from hopper_sim.navigation.runner import NavigationRunner
 from planner.imdp.grid import ACTIONS
@@ -115,7 +115,7 @@ def test_env_without_perturbations_lands_near_target(short_a, env):
         short_a,
         model=env.model,
         controller=env.controller,
-        settings=EnvSettings(terrain=False, noise=False),
+        settings=EnvConfig(terrain=False, noise=False),
     )
     quiet.reset(seed=0)
     _, reward, terminated, _, info = quiet.step(ACTIONS.index("E2"))
@@ -173,7 +173,7 @@ def test_env_pays_a_cell_once_per_episode_or_every_time(collect, env):
         sc,
         model=env.model,
         controller=env.controller,
-        settings=EnvSettings(terrain=False, noise=False),
+        settings=EnvConfig(terrain=False, noise=False),
     )
     grid, table = quiet.grid, quiet.reward_table
     rng = np.random.default_rng(0)

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from planner.errors import GPDataError
-from planner.gp import ErrorPredictor, FitSettings, LandingErrorGP, TruncatedGaussianNoise
+from planner.gp import ErrorPredictor, GPConfig, LandingErrorGP, TruncatedGaussianNoise
 from tests.planner.conftest import action_error
 
-SETTINGS = FitSettings(bias_std=0.3, field_std=0.15)
+SETTINGS = GPConfig(bias_std=0.3, field_std=0.15)
 
 
-def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, d: int):
+def _brute_force(settings: GPConfig, gp: LandingErrorGP, pos, err, act, pts, d: int):
     """The exact GP posterior of axis d at (pts, every action), from the full kernel matrix of
     the model as the module docstring writes it: e(x, a) = c_a + s_a u_a (o + f(x)) +
     s_a (1 - u_a) o_a + g_a(x)."""
@@ -45,7 +45,7 @@ def _brute_force(settings: FitSettings, gp: LandingErrorGP, pos, err, act, pts, 
 def test_prior_without_data_is_wide_and_centred_on_the_bias():
     bias = np.zeros((8, 2))
     bias[3, 0] = -0.2
-    gp = LandingErrorGP(FitSettings(bias_mean=bias, bias_std=0.4, field_std=0.3))
+    gp = LandingErrorGP(GPConfig(bias_mean=bias, bias_std=0.4, field_std=0.3))
     assert isinstance(gp, ErrorPredictor)
     mean, std = gp.predict(np.array([[0.5, 0.5], [7.0, 3.0]]))
     assert mean.shape == std.shape == (2, 8, 2)
@@ -61,7 +61,7 @@ def test_prior_without_data_is_wide_and_centred_on_the_bias():
 def test_posterior_is_the_exact_gp_posterior(synthetic_data, offset_std, scaled):
     pos, err, act = (a[:120] for a in synthetic_data)
     scale = np.linspace(0.3, 1.0, 16).reshape(8, 2) if scaled else 1.0
-    settings = FitSettings(bias_std=0.3, field_std=0.15, offset_std=offset_std, scale=scale)
+    settings = GPConfig(bias_std=0.3, field_std=0.15, offset_std=offset_std, scale=scale)
     gp = LandingErrorGP(settings)
     gp.fit(pos, err, act)
     pts = np.random.default_rng(2).uniform(-2.0, 17.0, size=(9, 2))
@@ -74,7 +74,7 @@ def test_posterior_is_the_exact_gp_posterior(synthetic_data, offset_std, scaled)
 
 def test_a_uniform_offset_is_learned_from_hops_far_away():
     # hops only in x < 4; the error is the controller's bias plus a uniform 0.3 m along x
-    settings = FitSettings(field_std=0.1, offset_std=0.3, bias_std=0.05, residual_std=0.02)
+    settings = GPConfig(field_std=0.1, offset_std=0.3, bias_std=0.05, residual_std=0.02)
     rng = np.random.default_rng(4)
     pos = rng.uniform([0.0, 0.0], [4.0, 15.0], size=(150, 2))
     act = rng.integers(0, 8, size=150)
@@ -97,7 +97,7 @@ def test_direction_aware_model_recovers_a_field_that_differs_per_action():
     pos = rng.uniform(0.0, 15.0, size=(n, 2))
     act = rng.integers(0, 8, size=n)
     err = action_error(pos, act) + rng.normal(0.0, 0.1, size=pos.shape)
-    settings = FitSettings(bias_std=0.3, field_std=0.15, max_data=n)
+    settings = GPConfig(bias_std=0.3, field_std=0.15, max_data=n)
     gp = LandingErrorGP(settings)
     gp.fit(pos, err, act)
     g = np.linspace(1.0, 14.0, 27)
@@ -120,7 +120,7 @@ def test_direction_aware_model_recovers_a_field_that_differs_per_action():
 def test_posterior_std_only_shrinks_as_data_are_added(synthetic_data):
     pos, err, act = synthetic_data
     # residual variances held at the prior guess (huge pseudo-count): the kernel is fixed
-    gp = LandingErrorGP(FitSettings(residual_count=1e12))
+    gp = LandingErrorGP(GPConfig(residual_count=1e12))
     pts = np.random.default_rng(3).uniform(0.0, 15.0, size=(200, 2))
     last = gp.predict(pts)[1]
     for n in (50, 100, 200, 400, 600):
@@ -169,9 +169,9 @@ def test_residual_std_is_estimated_per_action():
 
 def test_old_data_beyond_max_data_are_dropped(synthetic_data):
     pos, err, act = synthetic_data
-    gp = LandingErrorGP(FitSettings(max_data=100))
+    gp = LandingErrorGP(GPConfig(max_data=100))
     assert gp.fit(pos, err, act).num_data == 100
-    ref = LandingErrorGP(FitSettings(max_data=100))
+    ref = LandingErrorGP(GPConfig(max_data=100))
     ref.fit(pos[-100:], err[-100:], act[-100:])
     pts = np.array([[3.0, 4.0], [12.0, 1.0]])
     np.testing.assert_allclose(gp.predict(pts)[0], ref.predict(pts)[0])
@@ -182,7 +182,7 @@ def test_empty_data_returns_to_prior(synthetic_data):
     gp.fit(*synthetic_data)
     gp.fit(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, dtype=int))
     assert gp.num_data == 0
-    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], FitSettings().prior_std())
+    np.testing.assert_allclose(gp.predict(np.ones((1, 2)))[1], GPConfig().prior_std())
 
 
 @pytest.mark.parametrize(
@@ -217,4 +217,4 @@ def test_bad_data_is_rejected(pos, err, act, match):
 )
 def test_bad_settings_are_rejected(kwargs, match):
     with pytest.raises(GPDataError, match=match):
-        FitSettings(**kwargs)
+        GPConfig(**kwargs)
