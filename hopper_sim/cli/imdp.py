@@ -114,6 +114,7 @@ def run_solve(args: argparse.Namespace) -> int:
     from planner.errors import PlannerError
     from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
     from planner.imdp.io import TERMINAL, read_model
+    from planner.modes import Adversary, Objective
 
     fmt = model_format(args.file, args.format, "--format")
     input_file(args.file, "model file")
@@ -124,8 +125,8 @@ def run_solve(args: argparse.Namespace) -> int:
         model = read_model(args.file, fmt)
         spec = Specification(
             ReachAvoid(target, args.avoid),
-            "optimistic" if args.optimistic else "pessimistic",
-            "minimize" if args.minimize else "maximize",
+            Adversary.OPTIMISTIC if args.optimistic else Adversary.PESSIMISTIC,
+            Objective.MINIMIZE if args.minimize else Objective.MAXIMIZE,
         )
         alg = ValueIteration(tolerance=args.tolerance, certified=not args.uncertified)
         sol = solve(Problem(model, spec), alg)

@@ -27,6 +27,7 @@ from hopnav.arguments import (
 )
 from hopnav.errors import RunFailed, UsageError
 from hopnav.kernels import prepare_kernels
+from planner.modes import Candidates, TourMode
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,12 +42,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=positive_int, help="hop cap per run (default: scenario's)")
     p.add_argument(
         "--explore-to",
-        choices=("nonviolating", "accepting"),
+        choices=tuple(Candidates),
         help="end components exploration steers to (planner.candidates) [nonviolating]",
     )
     p.add_argument(
         "--tour",
-        choices=("reward", "coverage"),
+        choices=tuple(TourMode),
         help="exploration inside the chosen component (planner.tour) [reward]",
     )
     add_set_argument(p)

@@ -19,6 +19,7 @@ import numpy as np
 
 from hopper_sim.experiments.sweep_grid import PAPER_TABLE_I, SweepError, SweepRow, SweepSpec
 from hopper_sim.navigation.events import OUTCOMES
+from planner.modes import Outcome
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,7 @@ def summarize(
                 eps=e,
                 reward=mean_ci([r.reward for r in group], level),
                 steps=mean_ci([r.steps for r in group], level),
-                successes=counts["success"],
+                successes=counts[Outcome.SUCCESS],
                 outcomes=counts,
                 paper=paper_value(c, e),
             )

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, fields, is_dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
+from hopper_sim.errors import HopperSimError
 from hopper_sim.navigation.environment import EnvConfig
 from planner.config import P_SAT_KEY, RUNNER_KEYS, RunConfig
 from planner.errors import PlannerError, ScenarioError
@@ -51,7 +52,7 @@ GP_KEYS: tuple[str, ...] = tuple(
 _GP_TYPES = {"max_data": int, "num_threads": int | None}
 
 
-class ConfigError(ValueError):
+class ConfigError(HopperSimError, ValueError):
     """A key, type or value of the configuration tree is wrong (the message names the key)."""
 
 

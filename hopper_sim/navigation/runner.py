@@ -79,7 +79,7 @@ from planner._util.torch_threads import torch_threads
 from planner.gp.landing import LandingErrorGP
 from planner.imdp.analysis import accepting_states
 from planner.imdp.grid import ACTIONS
-from planner.imdp.product import check_product_size
+from planner.imdp.product import base_states, check_product_size
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import Resynthesis, replan_reward, resynthesise
 from planner.ltl.translate import translate
@@ -158,7 +158,7 @@ class NavigationRunner:
                 n_product,
                 len(ACTIONS),
                 self.grid.n_states,
-                state_cell=np.arange(n_product) // nq,
+                state_cell=base_states(self.grid.n_states, nq),
                 settings=q_settings,
             )
         prior = self.settings.gp_prior or error_prior(

@@ -27,6 +27,7 @@ from hopper_sim.viz.styles import (
     region_letters,
     simulate_cvd,
 )
+from planner.modes import Phase
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -128,9 +129,9 @@ def halo(width: float, color: str) -> list:
 
 
 ROUTE_STYLE: dict[str, dict[str, Any]] = {
-    "exploration": {"halo": "black", "linestyle": "-"},
-    "goal_reaching": {"halo": "white", "linestyle": "-"},
-    "fallback": {"halo": "black", "linestyle": (0, (2.0, 1.2))},
+    Phase.EXPLORATION: {"halo": "black", "linestyle": "-"},
+    Phase.GOAL_REACHING: {"halo": "white", "linestyle": "-"},
+    Phase.FALLBACK: {"halo": "black", "linestyle": (0, (2.0, 1.2))},
 }
 
 
@@ -151,7 +152,7 @@ def draw_route(ax: Axes, route: Route, scenario: Scenario) -> None:
             linewidths=lw,
             linestyles=style["linestyle"],
             capstyle="round",
-            zorder=3 if phase == "goal_reaching" else 2,
+            zorder=3 if phase == Phase.GOAL_REACHING else 2,
         )
         lines.set_path_effects(halo(lw + 1.4, style["halo"]))
         ax.add_collection(lines)

@@ -49,6 +49,7 @@ from hopper_sim.viz.figure_files import (
 from hopper_sim.viz.figure_legend import add_legend, region_handles, route_handles
 from hopper_sim.viz.figure_map import draw_route, draw_world, route_cover
 from hopper_sim.viz.figure_map import region_image as region_image  # re-exported
+from planner.modes import Outcome
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -136,7 +137,7 @@ def run_title(
     if end is not None:
         mission = getattr(end, "mission", None)
         what = end.outcome
-        if end.outcome == "satisfying" and mission is not None:
+        if end.outcome == Outcome.SATISFYING and mission is not None:
             what += f" ({mission.obligation})"
         title += f": {what}, {end.steps} hops, reward {end.reward:g}"
     elif hops is not None:

@@ -17,6 +17,7 @@ import rerun as rr
 
 from hopper_sim.navigation.events import HopEvent
 from hopper_sim.viz.styles import PHASE_CODES, PHASE_COLORS, PHASE_NAMES
+from planner.modes import Source
 
 _MIN_DURATION = 1e-6
 _HOP_FIELDS = {f.name for f in dataclasses.fields(HopEvent)}
@@ -174,7 +175,7 @@ def _send_plots(rec: rr.RecordingStream, base: str, hops: list[HopEvent], at_end
         "total_reward": [h.total_reward for h in hops],
         "reward": [h.reward for h in hops],
         "phase": [PHASE_CODES.get(h.phase, np.nan) for h in hops],
-        "rl_action": [1.0 if h.source == "RL" else 0.0 for h in hops],
+        "rl_action": [1.0 if h.source == Source.RL else 0.0 for h in hops],
         "backup": [1.0 if h.backup else 0.0 for h in hops],
     }
     for name, values in plots.items():

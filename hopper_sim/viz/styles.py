@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from planner.modes import Phase
+
 if TYPE_CHECKING:
     from planner.scenario import Scenario
 
@@ -50,18 +52,22 @@ _CYCLE: tuple[Rgb, ...] = tuple(
 )
 
 PHASE_COLORS: dict[str, Rgb] = {
-    "exploration": hex_rgb("#EFD643"),
-    "goal_reaching": (0, 0, 0),
-    "fallback": hex_rgb("#00A0B0"),
+    Phase.EXPLORATION: hex_rgb("#EFD643"),
+    Phase.GOAL_REACHING: (0, 0, 0),
+    Phase.FALLBACK: hex_rgb("#00A0B0"),
 }
 """Route colours per phase: exploration yellow, goal reaching black, fallback teal (dashed)."""
 
 PHASE_NAMES: dict[str, str] = {
-    "exploration": "exploration",
-    "goal_reaching": "goal reaching",
-    "fallback": "fallback",
+    Phase.EXPLORATION: "exploration",
+    Phase.GOAL_REACHING: "goal reaching",
+    Phase.FALLBACK: "fallback",
 }
-PHASE_CODES: dict[str, float] = {"exploration": 0.0, "goal_reaching": 1.0, "fallback": 2.0}
+PHASE_CODES: dict[str, float] = {
+    Phase.EXPLORATION: 0.0,
+    Phase.GOAL_REACHING: 1.0,
+    Phase.FALLBACK: 2.0,
+}
 """Numeric codes of the phases in time-series plots."""
 
 WHITE: Rgb = (255, 255, 255)
@@ -72,9 +78,9 @@ _COLOR_NAMES: dict[Rgb, str] = {
     LABEL_COLORS["A"]: "dark purple",
     LABEL_COLORS["B"]: "light purple",
     LABEL_COLORS["weak"]: "pink",
-    PHASE_COLORS["exploration"]: "yellow",
-    PHASE_COLORS["goal_reaching"]: "black",
-    PHASE_COLORS["fallback"]: "teal",
+    PHASE_COLORS[Phase.EXPLORATION]: "yellow",
+    PHASE_COLORS[Phase.GOAL_REACHING]: "black",
+    PHASE_COLORS[Phase.FALLBACK]: "teal",
     **dict(
         zip(_CYCLE, ("light blue", "teal green", "olive", "grey", "wine", "brown"), strict=True)
     ),

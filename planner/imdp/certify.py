@@ -29,6 +29,7 @@ from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import row_entries
+from planner.modes import Adversary
 
 OVI_PASSES = 8
 """Checking passes per optimistic candidate."""
@@ -100,7 +101,7 @@ class EndComponentBounds:
         self.sweeper = sweeper
         row_mask = np.zeros(m.n_rows, dtype=bool)
         row_mask[sweeper.rows] = True
-        comp, kept = end_component_labels(m, row_mask, free, "pessimistic")
+        comp, kept = end_component_labels(m, row_mask, free, Adversary.PESSIMISTIC)
         members = np.flatnonzero(comp >= 0)
         labels, label_of = np.unique(comp[members], return_inverse=True)
         n_comp = labels.size

@@ -255,7 +255,7 @@ def maximal_end_components(
     model: IMDP,
     rows: np.ndarray | None = None,
     states: np.ndarray | None = None,
-    mode: str = "pessimistic",
+    mode: Adversary = Adversary.PESSIMISTIC,
 ) -> list[EndComponent]:
     """Maximal end components, by iterated strongly-connected-component decomposition.
 
@@ -279,7 +279,7 @@ def end_component_labels(
     model: IMDP,
     rows: np.ndarray | None = None,
     states: np.ndarray | None = None,
-    mode: str = "pessimistic",
+    mode: Adversary = Adversary.PESSIMISTIC,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The maximal end components as labels: ``(comp, rows)``, ``comp[s]`` the component
     of ``s`` (-1: none) and the rows they keep (see :func:`maximal_end_components`;
@@ -298,7 +298,7 @@ def end_component_labels(
         inc_row,
         r,
         s,
-        mode == "optimistic",
+        mode == Adversary.OPTIMISTIC,
         1.0 - model.tolerance,
     )
 
@@ -375,7 +375,7 @@ def accepting_end_components(
     while work:
         region = work.pop()
         t, r = robust_buchi_region(model, good, region, rows)
-        for ec in maximal_end_components(model, rows=r, states=t, mode="pessimistic"):
+        for ec in maximal_end_components(model, rows=r, states=t, mode=Adversary.PESSIMISTIC):
             mask = ec.state_mask(model.n_states)
             ec_rows = np.zeros(model.n_rows, dtype=bool)
             ec_rows[ec.rows] = True
@@ -412,7 +412,7 @@ def optimistic_accepting_states(
 
 def _optimistic_accepting_labels(model, good, bad, rows):
     comp, kept = end_component_labels(
-        model, rows=rows, states=~np.asarray(bad, dtype=bool), mode="optimistic"
+        model, rows=rows, states=~np.asarray(bad, dtype=bool), mode=Adversary.OPTIMISTIC
     )
     good = np.asarray(good, dtype=bool)
     accepted = np.unique(comp[good & (comp >= 0)])

@@ -31,6 +31,13 @@ MAX_PRODUCT_STATES = 1 << 22
 MAX_PRODUCT_ENTRIES = 1 << 24
 
 
+def base_states(n_base: int, n_q: int) -> np.ndarray:
+    """The base-model state of every product state: product state ``s * n_q + q`` pairs base
+    state ``s`` with automaton state ``q`` (also before any product is built, e.g. to size a
+    learner's tables)."""
+    return np.arange(n_base * n_q) // n_q
+
+
 def check_product_size(n_states: int, n_entries: int, n_q: int) -> None:
     """Raise :class:`ProductError` if the product of a model of ``n_states`` states and
     ``n_entries`` successor entries with an automaton of ``n_q`` states would exceed
@@ -115,7 +122,7 @@ class ProductIMDP:
         )
         self.reward: np.ndarray = np.repeat(w, nq)
         """``W`` per product state."""
-        self.base_state: np.ndarray = np.arange(self.model.n_states) // nq
+        self.base_state: np.ndarray = base_states(self.model.n_states // nq, nq)
         self.automaton_state: np.ndarray = np.arange(self.model.n_states) % nq
         self.good: tuple[np.ndarray, ...] = tuple(
             np.isin(self.automaton_state, sorted(p.good)) for p in automaton.pairs

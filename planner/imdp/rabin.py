@@ -61,6 +61,7 @@ from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
 from planner.imdp.rabin_game import almost_sure_region
 from planner.imdp.solve import Problem, ReachAvoid, Solution, Specification, solve
+from planner.modes import Adversary
 
 __all__ = ["almost_sure_region", "evaluate_strategy", "rejecting_components", "robust_satisfaction"]
 
@@ -81,7 +82,9 @@ def rejecting_components(
     work = [graph.has_row(m, rows)]
     while work:
         states = work.pop()
-        for ec in graph.maximal_end_components(m, rows=rows, states=states, mode="optimistic"):
+        for ec in graph.maximal_end_components(
+            m, rows=rows, states=states, mode=Adversary.OPTIMISTIC
+        ):
             mask = ec.state_mask(m.n_states)
             g = (good & mask).any(axis=1)
             b = (bad & mask).any(axis=1)
@@ -115,7 +118,9 @@ def evaluate_strategy(
     stop = choice < 0
     bad_ec = rejecting_components(m, rows, good, bad) | stop
     allowed = graph.actions_from_rows(m, rows)
-    sol = solve(Problem(m, Specification(ReachAvoid(bad_ec), "optimistic"), allowed), algorithm)
+    sol = solve(
+        Problem(m, Specification(ReachAvoid(bad_ec), Adversary.OPTIMISTIC), allowed), algorithm
+    )
     return 1.0 - sol.upper, 1.0 - sol.lower
 
 
@@ -309,7 +314,7 @@ def _stays_accepting_outside(
         return False
     for i in pairs:
         states = outside & ~bad[i]
-        ecs = graph.maximal_end_components(m, rows=rows, states=states, mode="optimistic")
+        ecs = graph.maximal_end_components(m, rows=rows, states=states, mode=Adversary.OPTIMISTIC)
         if any(good[i][ec.states].any() for ec in ecs):
             return True
     return False

@@ -17,6 +17,7 @@ from planner.imdp.decoupled.reach import (
     strategy_iteration,
 )
 from planner.imdp.solve import Problem, ReachAvoid, Solution, Specification, ValueIteration, solve
+from planner.modes import Adversary
 
 
 class DecoupledProduct:
@@ -144,7 +145,7 @@ class DecoupledProduct:
         big, n = expanded_imdp(self.model)
         spec = Specification(
             ReachAvoid(np.concatenate([target, np.zeros(big.n_states - n, bool)])),
-            "pessimistic" if pessimistic else "optimistic",
+            Adversary.PESSIMISTIC if pessimistic else Adversary.OPTIMISTIC,
         )
         full = solve(Problem(big, spec), alg)
         return Solution(
