@@ -209,13 +209,13 @@ def _observe(scenario, settings, env, monkeypatch) -> dict[str, object]:
 
 
 class _Threads:
-    """Stands in for :func:`planner.torch_threads.torch_threads`, recording ``n``."""
+    """Stands in for :func:`planner._util.torch_threads.torch_threads`, recording ``n``."""
 
     def __init__(self, seen: dict) -> None:
         self.seen = seen
 
     def __call__(self, n):
-        from planner.torch_threads import torch_threads
+        from planner._util.torch_threads import torch_threads
 
         self.seen["torch_threads"] = n
         return torch_threads(n)
