@@ -105,7 +105,7 @@ def _mk_junction(
         if n is not None and n in items:
             return absorbing
     if len(items) > 1 and any(a.op == op for a in items):
-        return mk(*items)
+        return mk(*sorted(items, key=Formula.sort_key))
     return _finish(op, items, unit)
 
 

@@ -1,7 +1,10 @@
 """Abstract syntax of LTL formulas.
 
 A :class:`Formula` is an immutable, *interned* tree node: two structurally equal formulas are
-the same Python object, so equality is identity and hashing is O(1). Build formulas with the
+the same Python object, so equality is identity and hashing is O(1). Hashing is by identity,
+so the iteration order of a set of formulas depends on memory addresses and differs from
+process to process; wherever that order can reach a result, iterate in :meth:`Formula.sort_key`
+order, a structural total order. Build formulas with the
 constructor functions of this module (:func:`ap`, :func:`land`, :func:`until`, ...) or with
 :func:`planner.ltl.parser.parse`.
 
@@ -43,7 +46,7 @@ class Formula:
         depth: the temporal/boolean nesting depth (leaves have depth 0).
     """
 
-    __slots__ = ("__weakref__", "_props", "children", "depth", "name", "op", "size")
+    __slots__ = ("__weakref__", "_key", "_props", "children", "depth", "name", "op", "size")
 
     op: str
     children: tuple[Formula, ...]
@@ -63,6 +66,8 @@ class Formula:
         object.__setattr__(node, "size", 1 + sum(c.size for c in children))
         object.__setattr__(node, "depth", 1 + max((c.depth for c in children), default=-1))
         object.__setattr__(node, "_props", None)
+        sort_key = (node.size, op, name or "", tuple(c._key for c in children))
+        object.__setattr__(node, "_key", sort_key)
         _INTERN[key] = node
         return node
 
@@ -103,9 +108,12 @@ class Formula:
     def __repr__(self) -> str:
         return f"Formula({to_string(self)!r})"
 
-    # Ordering used to sort operands of n-ary nodes canonically.
     def sort_key(self) -> tuple:
-        return (self.size, self.op, self.name or "", tuple(c.sort_key() for c in self.children))
+        """``(size, op, name, children's keys)``: a structural key, so distinct formulas have
+        distinct keys and the order does not depend on the process (it sorts the operands of
+        ``&``/``|`` and the formulas of a tableau state). Computed once, at creation; equal
+        subtrees share their key, so comparing two keys stops at the first difference."""
+        return self._key
 
 
 TRUE = Formula("true")

@@ -140,7 +140,10 @@ def _expand(start: frozenset[Formula], bit: dict, ev_bit: dict) -> list[_Option]
     """The options ``(pos, neg, next, postponed)`` of state ``start``: depth-first over the
     branches, with an explicit stack (a formula with many disjunctions branches deeply)."""
     results: list[_Option] = []
-    stack: list[_Branch] = [(list(start), frozenset(), 0, 0, frozenset(), 0)]
+    # Structural order (not the set's, which follows memory addresses), so that the options,
+    # hence the numbering of the states, are the same in every process.
+    todo = sorted(start, key=Formula.sort_key)
+    stack: list[_Branch] = [(todo, frozenset(), 0, 0, frozenset(), 0)]
     while stack:
         option = _rewrite(stack.pop(), bit, ev_bit, stack)
         if option is not None:
