@@ -25,7 +25,7 @@ from contextlib import contextmanager
 from typing import Any, NoReturn
 
 from hopnav import __version__
-from hopnav.errors import EXIT_FAILED, EXIT_USAGE, CommandError
+from hopnav.errors import EXIT_FAILED, EXIT_USAGE, CommandError, is_interrupt
 
 #: command -> (module, one-line help), in the order ``hopnav --help`` lists them.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -134,6 +134,9 @@ def run_command(args: argparse.Namespace) -> int:
     except Exception as err:
         if os.environ.get("HOPNAV_DEBUG"):
             raise
+        if is_interrupt(err):  # Ctrl-C inside a compiled kernel
+            _say(prog, "interrupted")
+            return EXIT_FAILED
         if isinstance(err, OSError) and err.filename is not None:
             message = f"{err.strerror or err}: {err.filename}"
         else:

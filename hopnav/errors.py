@@ -38,3 +38,16 @@ class RunFailed(CommandError):
     """The work started and did not complete (exit code 1); finished results are kept."""
 
     exit_code = EXIT_FAILED
+
+
+def is_interrupt(err: BaseException) -> bool:
+    """Whether ``err`` is a Ctrl-C: a :class:`KeyboardInterrupt`, or the ``SystemError``
+    CPython raises when the interrupt's handler ran inside a compiled (numba) function
+    ("returned a result with an exception set"), whose cause chain holds the interrupt."""
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return False

@@ -25,7 +25,7 @@ from hopnav.arguments import (
     positive_int,
     run_config,
 )
-from hopnav.errors import RunFailed, UsageError
+from hopnav.errors import RunFailed, UsageError, is_interrupt
 from hopnav.kernels import prepare_kernels
 from planner.modes import Candidates, TourMode
 
@@ -344,7 +344,10 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         failure = "interrupted"
     except Exception as err:  # a failed run: keep what finished, then report it
-        failure = f"failed ({type(err).__name__}: {' '.join(str(err).split())})"
+        if is_interrupt(err):  # Ctrl-C inside a compiled kernel
+            failure = "interrupted"
+        else:
+            failure = f"failed ({type(err).__name__}: {' '.join(str(err).split())})"
     if failure is None:
         fan.close()
     else:

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from hopnav.arguments import add_set_argument, non_negative_int, output_folder, positive_int
-from hopnav.errors import RunFailed, UsageError
+from hopnav.errors import RunFailed, UsageError, is_interrupt
 from hopnav.kernels import prepare_kernels
 
 META_FILE = "sweep_meta.json"
@@ -272,6 +272,8 @@ def run(args: argparse.Namespace) -> int:
     except (SweepBackendError, SweepError) as err:
         raise UsageError(str(err)) from None
     except SweepRunError as err:
+        if is_interrupt(err):  # Ctrl-C inside a compiled kernel of a serial run
+            raise RunFailed(f"interrupted; {_kept(finished, out / ROWS_FILE)}") from None
         raise RunFailed(f"{err}; {_kept(finished, out / ROWS_FILE)}, after a fix") from None
     except KeyboardInterrupt:
         raise RunFailed(f"interrupted; {_kept(finished, out / ROWS_FILE)}") from None

@@ -159,3 +159,19 @@ def test_first_synthesis_compiles_nothing_after_the_warm_up():
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert proc.stdout.strip().splitlines()[-1] == "NEW {}"
+
+
+def test_an_interrupt_inside_a_compiled_kernel_counts_as_an_interrupt():
+    """CPython turns a Ctrl-C handled inside a numba function into a SystemError whose cause
+    is the KeyboardInterrupt; the commands report it as an interruption, not a failure."""
+    from hopnav.errors import is_interrupt
+
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ki:
+            raise SystemError("returned a result with an exception set") from ki
+    except SystemError as err:
+        assert is_interrupt(err)
+    assert not is_interrupt(SystemError("something else"))
+    assert not is_interrupt(ValueError("bad"))
