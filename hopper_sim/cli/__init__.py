@@ -4,11 +4,6 @@ The ``hopnav`` command line itself is :mod:`hopnav.cli`; it is re-exported here.
 
 from __future__ import annotations
 
-import sys
-
 from hopnav.cli import COMMANDS, build_parser, main, run_command
 
 __all__ = ["COMMANDS", "build_parser", "main", "run_command"]
-
-if __name__ == "__main__":
-    sys.exit(main())
