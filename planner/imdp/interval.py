@@ -12,14 +12,15 @@ held at ``L`` (sound, as in :mod:`planner.imdp.reachability`).
 When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a long
 time among states of nearly equal value: ``U`` creeps down at the rate of the circulation's
 leak), the states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration
-with the others held (when they are at most ``LOCAL_FRACTION`` of the free states;
-``_II_STALLS`` stalls with more end it): from below with ``L`` outside (a sound lower
-bound), and from above with ``U`` outside, *unlowered*: ``Y``. The candidate ``U`` with
-``min(U, max(Y, L) + tolerance / 4)`` on ``B`` is kept only if checking passes certify it
-superharmonic (:func:`planner.imdp.certify.check_upper`, violating states raised to their
-Bellman value until a pass finds none; then it bounds ``V*`` by Knaster-Tarski, however
-inexact ``Y`` was). At most ``_II_REPAIRS`` such repairs, none without
-``strategy_iteration``.
+with the others held, when they are at most ``LOCAL_FRACTION`` of the free states (when
+more are wide, the first such stall takes all free states as ``B`` if they are at most
+``GLOBAL_REPAIR_STATES``; ``_II_STALLS`` further stalls end it): from below with ``L``
+outside (a sound lower bound), and from above with ``U`` outside, *unlowered*: ``Y``. The
+candidate ``U`` with ``min(U, max(Y, L) + tolerance / 4)`` on ``B`` is kept only if
+checking passes certify it superharmonic (:func:`planner.imdp.certify.check_upper`,
+violating states raised to their Bellman value until a pass finds none; then it bounds
+``V*`` by Knaster-Tarski, however inexact ``Y`` was). At most ``_II_REPAIRS`` such
+repairs, none without ``strategy_iteration``.
 """
 
 from __future__ import annotations
@@ -37,6 +38,11 @@ FULL_EVERY = 4
 LOCAL_FRACTION = 0.25
 """Strategy iteration on the states still moving at a check when they are at most this
 fraction of the free states."""
+
+GLOBAL_REPAIR_STATES = 3_000
+"""A stalled interval iteration with more wide states than ``LOCAL_FRACTION`` is repaired by
+strategy iteration on all free states once, when they are at most this many (each
+evaluation is a few sparse LU solves: cheap here, ~0.5 s on a 10k-state grid)."""
 
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
@@ -70,6 +76,8 @@ class _IntervalIteration:
         self.bounds.deflate(self.u)
         self.residual = np.inf
         self.it = self.passes = self.evaluations = self.repairs = self.stalls = 0
+        self.global_repair = False
+        self.sigma: np.ndarray | None = None
 
     def width(self) -> float:
         st = self.sweeper.states
@@ -112,12 +120,15 @@ class _IntervalIteration:
         candidate), the candidate kept if checking passes certify it."""
         self.repairs += 1
         rows = self._held_rows(wide)
-        x, _, k = strategy.strategy_iteration(
+        x, sigma, k = strategy.strategy_iteration(
             self.m, rows, self.v, np.where(wide, 0.0, self.v), True, _CANDIDATE_SLACK
         )
         self.evaluations += k
         if x is not None:
             self.v = np.maximum(self.v, x)
+        if sigma is not None and rows.size == self.sweeper.rows.size:
+            # every free state: an exactly evaluated strategy that no state wants to leave
+            self.sigma = sigma
         # switching slack ~1e-15: a row left better than Y by more than tolerance / 4 times
         # its mass leaving B would fail the check
         u, v = self.u, self.v
@@ -161,6 +172,14 @@ class _IntervalIteration:
             if self.stalls >= _II_STALLS:
                 break
             if wide.sum() > LOCAL_FRACTION * st.size:
+                if st.size <= GLOBAL_REPAIR_STATES and not self.global_repair:
+                    # once: strategy iteration on all free states (the values exact
+                    # below, the candidate from them checked above)
+                    self.global_repair = True
+                    wide[st] = True
+                    self.repair(wide)
+                    checkpoint = self.width()
+                    continue
                 # too many states for a cheap repair: keep iterating for a while
                 self.stalls += 1
                 checkpoint = width
@@ -172,14 +191,15 @@ class _IntervalIteration:
 
 def interval_iteration(
     m: IMDP, sweeper: ReachSweeper, v: np.ndarray, alg: ValueIteration
-) -> tuple[np.ndarray, np.ndarray, float, int, int, bool, int]:
+) -> tuple[np.ndarray, np.ndarray, float, int, int, bool, int, np.ndarray | None]:
     """Interval iteration from the lower bound ``v`` (updated in place) and ``U = 1`` (see
     the module docstring).
 
-    Returns ``(lower, upper, residual, sweeps, upper_passes, done, evaluations)``:
+    Returns ``(lower, upper, residual, sweeps, upper_passes, done, evaluations, sigma)``:
     ``done`` when ``max(U - L) < tolerance``, else the caller continues from ``L`` and
-    ``U`` with its other means.
+    ``U`` with its other means; ``sigma`` the optimal strategy (one row per free state) of
+    a strategy iteration on all free states, or ``None``.
     """
     ii = _IntervalIteration(m, sweeper, v, alg)
     done = ii.run()
-    return ii.v, ii.u, ii.residual, ii.it, ii.passes, done, ii.evaluations
+    return ii.v, ii.u, ii.residual, ii.it, ii.passes, done, ii.evaluations, ii.sigma

@@ -170,10 +170,12 @@ class _ReachSweeps:
     def interval_iteration(self) -> bool:
         """Interval iteration first (certified maximal reachability against a minimising
         adversary); whether it closed the bracket."""
-        v, self.upper, self.residual, self.it, self.upper_sweeps, done, self.evaluations = (
+        v, self.upper, self.residual, self.it, self.upper_sweeps, done, self.evaluations, sigma = (
             interval_iteration(self.m, self.sweeper, self.v, self.alg)
         )
         self.v = v
+        if done:
+            self.sigma = sigma
         return done
 
     def _strategy_iteration(self, rows, held, max_rounds=None, keep_sigma=False) -> None:

@@ -84,3 +84,28 @@ def test_certified_bracket_with_end_components_contains_reference(zero_lower):
         ref = ref_reach(m, tgt, avd, pessimistic=True, maximize=True)
         assert sol.converged and sol.error < 1e-8
         assert np.all(sol.lower <= ref + 1e-10) and np.all(ref <= sol.upper + 1e-12)
+
+
+def escape_by_hazard(eps: float = 1e-6, leak: float = 1e-3, back: float = 1e-9) -> IMDP:
+    """State 0 waits (self-loop) or tries (``eps`` to the goal 2, the rest to 0 or 1 as
+    the adversary likes); state 1 returns to 0 with ``back`` for sure, may go to the hazard
+    3 with at most ``leak`` and otherwise stays. Worst case (adversary: the hazard and 1
+    first): ``V1 = a V0`` with ``a = back / (leak + back)`` and ``V0 = eps / (1 - (1 - eps)
+    a)``. Both sides of interval iteration creep at the rate ``1 - leak`` and both states
+    stay wide (a stall with every free state wide)."""
+    s = [0, 0, 0, 0, 1, 1, 1, 2, 3]
+    a = [0, 1, 1, 1, 0, 0, 0, 0, 0]
+    t = [0, 2, 0, 1, 0, 1, 3, 2, 3]
+    lo = [1.0, eps, 0.0, 0.0, back, 0.0, 0.0, 1.0, 1.0]
+    up = [1.0, eps, 1.0, 1.0, back, 1.0, leak, 1.0, 1.0]
+    return IMDP(4, s, a, t, lo, up, labels=[(), (), ("goal",), ("bad",)])
+
+
+def test_slow_escape_with_every_state_wide_is_certified():
+    eps, leak, back = 1e-6, 1e-3, 1e-9
+    a = back / (leak + back)
+    v0 = eps / (1.0 - (1.0 - eps) * a)
+    sol = solve(Problem(escape_by_hazard(eps, leak, back), Specification(ReachAvoid("goal"))))
+    assert sol.converged and sol.error < 1e-8
+    assert sol.lower[0] <= v0 + 1e-15 and v0 <= sol.upper[0] + 1e-15
+    assert sol.lower[1] <= a * v0 + 1e-15 and a * v0 <= sol.upper[1] + 1e-15
