@@ -242,7 +242,8 @@ class AxisIntervals:
     ``y_lower``, ``y_upper`` ``(R, ny)`` in row ``j``; ``inside_x``, ``inside_y`` ``(R, 2)``
     bound (lower, upper) the probability of staying inside the world along that axis. The
     axes are independent, so a 2-D distribution is the product of one distribution per axis
-    (the orthogonally decoupled abstraction)."""
+    (the orthogonally decoupled abstraction, :mod:`planner.imdp.decoupled`, whose bins are
+    :meth:`bins`); :func:`transition_intervals` multiplies the same bounds."""
 
     state: np.ndarray
     action: np.ndarray
@@ -252,6 +253,23 @@ class AxisIntervals:
     y_upper: np.ndarray
     inside_x: np.ndarray
     inside_y: np.ndarray
+
+    def bins(self, axis: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per-axis bin bounds ``(lower, upper)``, ``(R, n + 1)``: the ``n`` columns (axis 0)
+        or rows (axis 1), then *outside* (below ``0`` or above ``n cell``), whose probability
+        ``1 - P_in`` is bounded by ``[1 - max P_in, 1 - min P_in]`` (exact over the box,
+        as the out bounds of :func:`transition_intervals`). Each row brackets one:
+        ``sum_b min_e P_b(e) <= min_e sum_b P_b(e) = 1`` and likewise for the maxima."""
+        if axis not in (0, 1):
+            raise IntervalError(f"axis must be 0 (x) or 1 (y), got {axis}")
+        lo, up, inside = (
+            (self.x_lower, self.x_upper, self.inside_x)
+            if axis == 0
+            else (self.y_lower, self.y_upper, self.inside_y)
+        )
+        out_lo = np.clip(1.0 - inside[:, 1], 0.0, 1.0)[:, None]
+        out_hi = np.clip(1.0 - inside[:, 0], 0.0, 1.0)[:, None]
+        return np.hstack([lo, out_lo]), np.hstack([up, out_hi])
 
 
 def _window_bounds(
@@ -268,30 +286,6 @@ def _window_bounds(
 
     peak = np.clip(0.5 * (lo + hi), e_lo, e_hi)
     return np.minimum(prob(e_lo), prob(e_hi)), prob(peak)
-
-
-def axis_bin_bounds(
-    noise: TruncatedGaussianNoise,
-    n: int,
-    cell: float,
-    target: np.ndarray,
-    e_lo: np.ndarray,
-    e_hi: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis landing bounds for the decoupled abstraction
-    (:mod:`planner.imdp.decoupled`): for rows aiming at ``target`` (shape ``(rows,)``,
-    metres) with the mean error in ``[e_lo, e_hi]``, the min and max over that interval of
-    the probability of landing in each of the ``n + 2`` bins *below* ``0``, the ``n``
-    columns ``[k cell, (k + 1) cell)``, and *above* ``n cell``. Shapes ``(rows, n + 2)``."""
-    t = np.asarray(target, dtype=np.float64)[:, None]
-    edges = np.concatenate(([-np.inf], np.arange(n + 1, dtype=np.float64) * cell, [np.inf]))
-    return _window_bounds(
-        noise,
-        edges[None, :-1] - t,
-        edges[None, 1:] - t,
-        np.asarray(e_lo, dtype=np.float64)[:, None],
-        np.asarray(e_hi, dtype=np.float64)[:, None],
-    )
 
 
 def _validated_bounds(bounds: CellErrorBounds, grid: GridWorld) -> tuple[np.ndarray, ...]:

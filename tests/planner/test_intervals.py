@@ -176,6 +176,25 @@ def test_axis_intervals_are_the_factors_of_the_product():
     assert (ax.x_upper.sum(1) + leave_hi >= 1 - 1e-12).all()
 
 
+def test_axis_bins_add_the_outside_bin_and_bracket_one():
+    rng = np.random.default_rng(9)
+    lo = rng.uniform(-0.6, 0.2, size=(NX * NY, NA, 2))
+    b = CellErrorBounds(lo, lo + 0.4, np.full((NA, 2), 0.07), 0.0, 0.01, 1)
+    ax = axis_intervals(b, GRID)
+    for d, (p_lo, p_hi, inside) in enumerate(
+        ((ax.x_lower, ax.x_upper, ax.inside_x), (ax.y_lower, ax.y_upper, ax.inside_y))
+    ):
+        b_lo, b_hi = ax.bins(d)
+        assert b_lo.shape == (len(ax.state), p_lo.shape[1] + 1)
+        assert np.array_equal(b_lo[:, :-1], p_lo) and np.array_equal(b_hi[:, :-1], p_hi)
+        assert b_lo[:, -1] == pytest.approx(1 - inside[:, 1], abs=1e-15)
+        assert b_hi[:, -1] == pytest.approx(1 - inside[:, 0], abs=1e-15)
+        assert (b_lo.sum(1) <= 1 + 1e-12).all() and (b_hi.sum(1) >= 1 - 1e-12).all()
+        assert (b_hi[:, -1] > 0).any()  # hops that can leave the world
+    with pytest.raises(IntervalError, match="axis"):
+        ax.bins(2)
+
+
 def test_per_axis_bounds_are_min_and_max_over_the_error_interval():
     noise = TruncatedGaussianNoise()
     e_lo, e_hi = -0.3, 0.25

@@ -5,12 +5,14 @@ A row ``(s, a)`` has per-axis bins with intervals: ``x`` bins ``X_r`` with
 ``[l^x_b, u^x_b]`` and ``y`` bins ``Y_r`` with ``[l^y_b, u^y_b]``. The adversary picks one
 distribution per axis inside its intervals, ``p^x`` and ``p^y`` (each summing to 1), and
 the successor is the state ``map[b_x, b_y]`` of the landed bin pair, with probability
-``p^x(b_x) p^y(b_y)``. On the grid the bins of an axis are the ``n`` columns plus *below*
-and *above*, and a bin pair with either bin outside maps to the absorbing ``out`` state.
+``p^x(b_x) p^y(b_y)``. On the grid the bins of an axis are the ``n`` columns plus
+*outside*, and a bin pair with either bin outside maps to the absorbing ``out`` state.
 This is IntervalMDP.jl's orthogonally decoupled model; it fits the abstraction because the
-landing noise and the error bounds are independent per axis, and it is tighter than the
-product-interval IMDP (:func:`planner.intervals.transition_intervals`), whose adversary may
-pick any joint distribution inside the products of the per-axis bounds.
+landing noise and the error bounds are independent per axis. Built from the same per-axis
+intervals (:func:`planner.intervals.axis_intervals`, residual included; see
+:mod:`planner.imdp.decoupled.abstraction`), it is tighter than the product-interval IMDP
+(:func:`planner.intervals.transition_intervals`), whose adversary may pick any joint
+distribution inside the products of the per-axis bounds.
 
 **The robust Bellman operator is exact.** For values ``v``,
 
@@ -35,7 +37,7 @@ from below, certified from above like :func:`planner.imdp.solve.solve` (a candid
 ``min(1, L + tolerance / 2)`` checked superharmonic, which bounds the least fixed point).
 """
 
-from planner.imdp.decoupled.abstraction import grid_decoupled_model
+from planner.imdp.decoupled.abstraction import decoupled_from_axes, grid_decoupled_model
 from planner.imdp.decoupled.model import DecoupledIMDP
 from planner.imdp.decoupled.product import DecoupledProduct
 from planner.imdp.decoupled.reach import (
@@ -48,6 +50,7 @@ from planner.imdp.decoupled.reach import (
 __all__ = [
     "DecoupledIMDP",
     "DecoupledProduct",
+    "decoupled_from_axes",
     "expanded_imdp",
     "expanded_size",
     "grid_decoupled_model",

@@ -192,17 +192,22 @@ class DecoupledIMDP:
         self.width = int(max(np.max(i_len), 1))
 
     def successors(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(row, state)`` pairs of every possible successor (``upper > 0`` in both
-        axes), deduplicated: the graph of the best case."""
+        """``(row, state)`` pairs of every possible successor, deduplicated and sorted by
+        row then state: the graph of the best case. Row ``r`` reaches
+        ``maps[row_map[r], b_x, b_y]`` for every ``x`` entry ``b_x`` and ``y`` entry ``b_y``
+        of ``r`` with ``upper > 0`` (entry pairs enumerated as ``k = i * n_y(r) + j``)."""
         (xp, xb, _, xu), (yp, yb, _, yu) = self.axes
-        rows, states = [], []
-        for r in range(self.n_rows):
-            bx = xb[xp[r] : xp[r + 1]][xu[xp[r] : xp[r + 1]] > 0]
-            by = yb[yp[r] : yp[r + 1]][yu[yp[r] : yp[r + 1]] > 0]
-            succ = np.unique(self.maps[self.row_map[r]][np.ix_(bx, by)])
-            rows.append(np.full(succ.size, r))
-            states.append(succ)
-        return np.concatenate(rows), np.concatenate(states)
+        n_x, n_y = np.diff(xp), np.diff(yp)
+        size = n_x * n_y
+        row = np.repeat(np.arange(self.n_rows, dtype=np.int64), size)
+        k = np.arange(row.size, dtype=np.int64) - np.repeat(np.cumsum(size) - size, size)
+        ix = xp[row] + k // n_y[row]
+        iy = yp[row] + k % n_y[row]
+        keep = (xu[ix] > 0.0) & (yu[iy] > 0.0)
+        row, ix, iy = row[keep], ix[keep], iy[keep]
+        state = self.maps[self.row_map[row], xb[ix], yb[iy]]
+        key = np.unique(row * self.n_states + state)
+        return key // self.n_states, key % self.n_states
 
     def expectation(self, values: np.ndarray, minimize: bool = True) -> np.ndarray:
         """The adversary's (min or max) expectation of ``values`` for every row."""

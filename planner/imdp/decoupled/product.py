@@ -115,14 +115,19 @@ class DecoupledProduct:
         return np.isin(np.arange(self.n_states) % self.n_q, sorted(sinks))
 
     def satisfaction(
-        self, pessimistic: bool = True, algorithm: ValueIteration | None = None
+        self,
+        adversary: Adversary = Adversary.PESSIMISTIC,
+        algorithm: ValueIteration | None = None,
     ) -> Solution:
-        """Worst-case (or best-case) satisfaction per product state, certified: by sweeps
+        """Maximal satisfaction probability per product state against the ``adversary``
+        (:class:`planner.modes.Adversary`; a plain string is accepted: worst case, ``P_check``,
+        by default; the cooperating adversary gives the best case), certified: by sweeps
         with the exact operator; where their bracket does not close (a region the
         controller can circulate in, with equal values), on :func:`expanded_imdp` by
         :func:`planner.imdp.solve.solve` (its strategy iteration makes the values exact)
         when the model has at most ``_EXPAND_MAX_ROWS`` rows (the direct sweeps are then
         capped at ``_DIRECT_SWEEPS``: they can creep where mass leaks slowly)."""
+        pessimistic = Adversary(adversary) == Adversary.PESSIMISTIC
         target = self.accepting_sink()
         alg = ValueIteration() if algorithm is None else algorithm
         small = self.model.n_rows <= _EXPAND_MAX_ROWS
@@ -145,7 +150,7 @@ class DecoupledProduct:
         big, n = expanded_imdp(self.model)
         spec = Specification(
             ReachAvoid(np.concatenate([target, np.zeros(big.n_states - n, bool)])),
-            Adversary.PESSIMISTIC if pessimistic else Adversary.OPTIMISTIC,
+            Adversary(adversary),
         )
         full = solve(Problem(big, spec), alg)
         return Solution(

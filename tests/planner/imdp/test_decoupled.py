@@ -1,25 +1,15 @@
 """Orthogonally decoupled IMDPs: the exact Bellman operator against brute-force
-enumeration of per-axis vertex distributions, and the grid abstraction against the
-product-interval IMDP built from the same per-axis bounds."""
+enumeration of per-axis vertex distributions, the successor graph, the product's adversary
+(the grid abstraction: ``test_decoupled_abstraction.py``)."""
 
 from itertools import product as cartesian
 
 import numpy as np
 import pytest
 
-from planner.errors import ModelError, ProductError
-from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
-from planner.imdp.analysis import satisfaction, winning_states
-from planner.imdp.decoupled import (
-    DecoupledIMDP,
-    DecoupledProduct,
-    grid_decoupled_model,
-    solve_reach,
-)
-from planner.imdp.grid import GridWorld
-from planner.imdp.product import ProductIMDP
-from planner.intervals import TruncatedGaussianNoise, axis_bin_bounds
-from planner.ltl.translate import translate
+from planner.imdp import ValueIteration
+from planner.imdp.decoupled import DecoupledIMDP, DecoupledProduct, solve_reach
+from planner.modes import Adversary
 from tests.planner.imdp.helpers import until_automaton
 from tests.planner.imdp.rabin_reference import vertices
 
@@ -156,84 +146,74 @@ def test_nested_ordering_would_be_only_a_lower_bound():
     assert m.expectation(np.array([1.0, 0.0]), minimize=False)[1] == pytest.approx(1.0)
 
 
-def grid_case(seed: int, layout: int = 0):
-    """A 6 x 5 world (one of three hazard/goal layouts) with random per-row error bounds."""
-    labels = [()] * 30
-    haz, goal = ([7], 18) if layout == 0 else ([8, 13], 14) if layout == 1 else ([7, 22], 12)
-    for h in haz:
-        labels[h] = ("Haz",)
-    labels[goal] = ("Goal",)
-    g = GridWorld(6, 5, 1.0, labels)
-    rng = np.random.default_rng(seed)
-    s, a = np.nonzero(g.enabled[: g.n_cells])
-    width = rng.uniform(0.0, 0.5, size=(s.size, 2))
-    centre = rng.uniform(-0.2, 0.2, size=(s.size, 2))
-    return g, s, a, centre - width, centre + width
+def successors_by_loop(m: DecoupledIMDP) -> tuple[np.ndarray, np.ndarray]:
+    """The successor graph row by row (the reference for the vectorised one)."""
+    (xp, xb, _, xu), (yp, yb, _, yu) = m.axes
+    rows, states = [], []
+    for r in range(m.n_rows):
+        bx = xb[xp[r] : xp[r + 1]][xu[xp[r] : xp[r + 1]] > 0]
+        by = yb[yp[r] : yp[r + 1]][yu[yp[r] : yp[r + 1]] > 0]
+        succ = np.unique(m.maps[m.row_map[r]][np.ix_(bx, by)])
+        rows.append(np.full(succ.size, r))
+        states.append(succ)
+    return np.concatenate(rows), np.concatenate(states)
 
 
-def product_interval_model(g, s, a, e_lo, e_hi, noise):
-    """The product-interval IMDP of the same per-axis bin bounds (products of the per-axis
-    bounds, ``out`` from the per-axis probabilities of staying inside)."""
-    centre = g.target_centres[s, a]
-    per = []
-    for d, n in ((0, g.nx), (1, g.ny)):
-        lo, hi = axis_bin_bounds(noise, n, g.cell, centre[:, d], e_lo[:, d], e_hi[:, d])
-        per.append((lo, hi))
-    (xl, xh), (yl, yh) = per
-    lower = (xl[:, 1:-1, None] * yl[:, None, 1:-1]).reshape(s.size, -1)
-    upper = (xh[:, 1:-1, None] * yh[:, None, 1:-1]).reshape(s.size, -1)
-    in_x_lo, in_x_hi = 1 - xh[:, [0, -1]].sum(1), 1 - xl[:, [0, -1]].sum(1)
-    in_y_lo, in_y_hi = 1 - yh[:, [0, -1]].sum(1), 1 - yl[:, [0, -1]].sum(1)
-    out_lo = np.clip(1 - np.clip(in_x_hi, 0, 1) * np.clip(in_y_hi, 0, 1), 0, 1)
-    out_hi = np.clip(1 - np.clip(in_x_lo, 0, 1) * np.clip(in_y_lo, 0, 1), 0, 1)
-    lower = np.concatenate([lower, out_lo[:, None]], axis=1)
-    upper = np.concatenate([upper, out_hi[:, None]], axis=1)
-    row, succ = np.nonzero(upper > 0)
-    return g.imdp_from_intervals(s[row], a[row], succ, lower[row, succ], upper[row, succ])
+def test_successors_are_every_pair_of_possible_bins():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        m = random_decoupled(rng, n=int(rng.integers(3, 8)), nxb=int(rng.integers(2, 5)), nyb=4)
+        (_, _, _, xu), (_, _, _, yu) = m.axes
+        xu[rng.random(xu.size) < 0.2] = 0.0  # bins that cannot be reached are not successors
+        yu[rng.random(yu.size) < 0.2] = 0.0
+        rows, states = m.successors()
+        ref_rows, ref_states = successors_by_loop(m)
+        np.testing.assert_array_equal(rows, ref_rows)
+        np.testing.assert_array_equal(states, ref_states)
 
 
-def test_grid_decoupled_never_below_product_interval():
-    # the product-interval adversary may pick any joint distribution inside the products of
-    # the per-axis bounds, the decoupled one only products: never lower (up to the two
-    # certified brackets), and higher somewhere (here: hazard and out mass that a product
-    # of per-axis distributions cannot both maximise)
-    noise = TruncatedGaussianNoise()
-    gains = []
-    for layout in (0, 2):
-        for seed in range(3):
-            g, s, a, e_lo, e_hi = grid_case(seed, layout)
-            dec = DecoupledProduct(
-                grid_decoupled_model(g, s, a, e_lo, e_hi, noise), until_automaton()
-            )
-            d = dec.satisfaction()
-            ip = ProductIMDP(product_interval_model(g, s, a, e_lo, e_hi, noise), until_automaton())
-            pint = satisfaction(ip)
-            assert d.converged and pint.converged
-            assert np.all(d.values >= pint.values - 1e-8)
-            gains.append(float(np.max(d.values - pint.values)))
-    assert max(gains) > 1e-6
+def test_product_satisfaction_takes_the_adversary():
+    rng = np.random.default_rng(3)
+    m = random_decoupled(rng, n=6)
+    goal = [("Goal",), ()] + [()] * 4
+    m = DecoupledIMDP(
+        m.n_states,
+        m.row_state,
+        m.row_action,
+        *m.axes[0],
+        *m.axes[1],
+        m.maps,
+        m.row_map,
+        n_actions=m.n_actions,
+        labels=goal,
+        propositions=("Goal", "Haz"),
+        initial=range(m.n_states),
+    )
+    dp = DecoupledProduct(m, until_automaton())
+    worst = dp.satisfaction()
+    best = dp.satisfaction(Adversary.OPTIMISTIC)
+    assert np.array_equal(dp.satisfaction("pessimistic").values, worst.values)
+    assert np.all(best.values >= worst.values - 1e-12)
+    # the product of !Haz U Goal with a model without hazards is reachability of the goal
+    ref_worst, ref_best = brute_force_reach(m_goal(m), True), brute_force_reach(m_goal(m), False)
+    init = np.arange(m.n_states) * dp.n_q + dp.automaton.transitions[0, dp.letters]
+    assert worst.values[init] == pytest.approx(ref_worst, abs=1e-8)
+    assert best.values[init] == pytest.approx(ref_best, abs=1e-8)
+    assert np.max(ref_best - ref_worst) > 1e-3  # the two adversaries differ here
+    with pytest.raises(ValueError):
+        dp.satisfaction("cooperative")
 
 
-def test_grid_decoupled_with_point_error_matches_the_interval_model():
-    # zero-width error bounds: per-axis bounds differ only by the noise's own width (both
-    # models exact products of fixed per-axis distributions: same values)
-    noise = TruncatedGaussianNoise()
-    g, s, a, e_lo, _ = grid_case(3)
-    dm = grid_decoupled_model(g, s, a, e_lo, e_lo, noise)
-    dec = DecoupledProduct(dm, until_automaton()).satisfaction()
-    ip = ProductIMDP(product_interval_model(g, s, a, e_lo, e_lo, noise), until_automaton())
-    assert dec.values == pytest.approx(satisfaction(ip).values, abs=1e-8)
-    reach = solve(Problem(ip.model, Specification(ReachAvoid(winning_states(ip)))))
-    assert dec.values == pytest.approx(reach.values, abs=1e-8)
-
-
-def test_errors():
-    noise = TruncatedGaussianNoise()
-    g, s, a, e_lo, e_hi = grid_case(0)
-    with pytest.raises(ModelError, match="every enabled"):
-        grid_decoupled_model(g, s[1:], a[1:], e_lo[1:], e_hi[1:], noise)
-    with pytest.raises(ModelError, match="shape"):
-        grid_decoupled_model(g, s, a, e_lo[:, :1], e_hi, noise)
-    dm = grid_decoupled_model(g, s, a, e_lo, e_hi, noise)
-    with pytest.raises(ProductError, match="co-safe"):
-        DecoupledProduct(dm, translate("G F Goal")).satisfaction()
+def m_goal(m: DecoupledIMDP) -> DecoupledIMDP:
+    """``m`` with its ``Goal`` states labelled ``goal`` (for :func:`brute_force_reach`)."""
+    return DecoupledIMDP(
+        m.n_states,
+        m.row_state,
+        m.row_action,
+        *m.axes[0],
+        *m.axes[1],
+        m.maps,
+        m.row_map,
+        n_actions=m.n_actions,
+        labels=[("goal",) if g else () for g in m.states_labelled("Goal")],
+    )
