@@ -148,11 +148,15 @@ def row_value(lay, r, v, minimize, w, idx, keys, pin):
 
 
 @numba.njit(cache=True, nogil=True)
-def sweep(states, row_lo, row_hi, v, lower_side, maximize_rows, minimize_adv, lay, width):
+def sweep(
+    states, row_lo, row_hi, v, lower_side, maximize_rows, minimize_adv, lay, width, raise_bad
+):
     """One Gauss-Seidel pass over ``states``. From below (``lower_side``): ``V <- max(V,
     T(V))``, returns ``(max increase, 0)``. From above: ``V <- T(V)`` where that does not
-    raise ``V`` (else a violation, see :func:`planner.imdp.kernels.upper_sweep`), returns
-    ``(max decrease, violations)``."""
+    raise ``V`` (else a violation, see :func:`planner.imdp.kernels.upper_sweep`; with
+    ``raise_bad`` the violating state takes its Bellman value: a candidate's repair, which
+    only a later pass without violations certifies), returns ``(max decrease,
+    violations)``."""
     w, idx, keys, pin = _scratch(width)
     change = 0.0
     bad = 0
@@ -175,6 +179,8 @@ def sweep(states, row_lo, row_hi, v, lower_side, maximize_rows, minimize_adv, la
                 change = old - best
         elif best > old + 1e-15:
             bad += 1
+            if raise_bad:
+                v[s] = best
     return change, bad
 
 

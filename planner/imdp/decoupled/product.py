@@ -174,5 +174,5 @@ _EXPAND_MAX_ENTRIES = 2_000_000
 """Entries of the expanded model (vertex pairs times their supports) up to which it is
 built; beyond, the direct solve's (sound, possibly wide) bracket is returned."""
 
-_DIRECT_SWEEPS = 2_000
+_DIRECT_SWEEPS = 200
 """Sweeps of the direct solve before the fallback (it can creep where mass leaks slowly)."""

@@ -72,7 +72,7 @@ def solve_reach(
 
     def sweep(x: np.ndarray, lower_side: bool) -> tuple[float, int]:
         return operator.sweep(
-            states, row_lo, row_hi, x, lower_side, True, pessimistic, layout, m.width
+            states, row_lo, row_hi, x, lower_side, True, pessimistic, layout, m.width, False
         )
 
     it, residual, goal, upper, passes = 0, 0.0, alg.tolerance, None, 0
@@ -136,15 +136,17 @@ def certify_candidate(
     pessimistic: bool,
     alg: ValueIteration,
 ) -> Solution | None:
-    """The bracket ``[lower, min(1, lower + tolerance / 2)]`` if the upper end passes the
-    superharmonic check (:func:`_sweep` from above), else ``None``."""
+    """The bracket ``[lower, U]`` from the candidate ``min(1, lower + tolerance / 2)`` if
+    checking passes (:func:`operator.sweep` from above) certify ``U`` superharmonic,
+    violating states raised to their Bellman value (rounding of the values from strategy
+    iteration) until a pass finds none; else ``None``."""
     order = states[np.lexsort((states,))]
     row_lo, row_hi = m.state_ptr[order], m.state_ptr[order + 1]
     u = lower.copy()
     u[order] = np.minimum(1.0, lower[order] + alg.tolerance / 2)
-    for _ in range(8):
+    for _ in range(16):
         _, bad = operator.sweep(
-            order, row_lo, row_hi, u, False, True, pessimistic, m.layout, m.width
+            order, row_lo, row_hi, u, False, True, pessimistic, m.layout, m.width, True
         )
         if bad == 0:
             return Solution(
