@@ -176,19 +176,7 @@ def test_product_satisfaction_takes_the_adversary():
     rng = np.random.default_rng(3)
     m = random_decoupled(rng, n=6)
     goal = [("Goal",), ()] + [()] * 4
-    m = DecoupledIMDP(
-        m.n_states,
-        m.row_state,
-        m.row_action,
-        *m.axes[0],
-        *m.axes[1],
-        m.maps,
-        m.row_map,
-        n_actions=m.n_actions,
-        labels=goal,
-        propositions=("Goal", "Haz"),
-        initial=range(m.n_states),
-    )
+    m = relabelled(m, goal, propositions=("Goal", "Haz"), initial=range(m.n_states))
     dp = DecoupledProduct(m, until_automaton())
     worst = dp.satisfaction()
     best = dp.satisfaction(Adversary.OPTIMISTIC)
@@ -204,8 +192,8 @@ def test_product_satisfaction_takes_the_adversary():
         dp.satisfaction("cooperative")
 
 
-def m_goal(m: DecoupledIMDP) -> DecoupledIMDP:
-    """``m`` with its ``Goal`` states labelled ``goal`` (for :func:`brute_force_reach`)."""
+def relabelled(m: DecoupledIMDP, labels, **kwargs) -> DecoupledIMDP:
+    """``m`` with other ``labels`` (and other keyword arguments of the constructor)."""
     return DecoupledIMDP(
         m.n_states,
         m.row_state,
@@ -215,5 +203,11 @@ def m_goal(m: DecoupledIMDP) -> DecoupledIMDP:
         m.maps,
         m.row_map,
         n_actions=m.n_actions,
-        labels=[("goal",) if g else () for g in m.states_labelled("Goal")],
+        labels=labels,
+        **kwargs,
     )
+
+
+def m_goal(m: DecoupledIMDP) -> DecoupledIMDP:
+    """``m`` with its ``Goal`` states labelled ``goal`` (for :func:`brute_force_reach`)."""
+    return relabelled(m, [("goal",) if g else () for g in m.states_labelled("Goal")])
