@@ -29,6 +29,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
+from planner.imdp.kernels import chain_residual
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
 
@@ -58,24 +59,76 @@ def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     return out[:k]
 
 
+_REFINE = 4
+"""Rounds of iterative refinement of a chain solve (each a double-double residual and a
+solve with the same factorisation)."""
+
+_FLOOR = 1e-28
+"""The double-double residual's own rounding, per row (values and probabilities in
+``[0, 1]``, rows summing to at most 1)."""
+
+
+_SOLVE_MARGIN = 1e-3
+"""Relative margin on the computed error bound ``A^-1 rhs``."""
+
+
+class ChainError:
+    """Elementwise rounding bounds of a :func:`chain_reach` solve.
+
+    With ``A = I - P`` on the live states (non-singular, ``A^-1 >= 0``) and the residual
+    ``r = b - A x`` of the computed ``x`` (double-double, :func:`chain_residual`), the
+    error is ``A^-1 r``, so ``|x* - x| <= A^-1 |r|`` elementwise: small where the chain
+    leaves the live states fast *or* the values are small, unlike the norm bound
+    ``||A^-1 1|| ||r||`` (``1e8`` steps times ``1e-16`` on a slowly mixing chain).
+
+    The chain's probabilities are themselves rounded (an adversary's distribution is
+    computed, not exact): each row's expectation is taken to be off by up to ``4 eps``
+    times the largest value among its successors, an error of the right-hand side like the
+    residual. Both scale with the values, so states that circulate
+    for long among states of tiny value keep a tiny bound.
+    """
+
+    def __init__(
+        self, n_states: int, live: np.ndarray, states: np.ndarray, lu, residual: np.ndarray
+    ) -> None:
+        self._n, self._live, self._states = n_states, live, states
+        self._lu, self._residual = lu, residual
+        """``|r|`` plus the rounding of the rows, one entry per live state."""
+
+    def bound(self, extra: np.ndarray | None = None) -> np.ndarray:
+        """``(n_states,)`` bounds of ``|x* - x|`` (0 off the live states), for the system
+        whose right-hand side may also be off by ``extra >= 0`` (one entry per row of the
+        solved matrix), with a relative margin for the rounding of this solve itself (its
+        forward error is at most about ``cond(A) eps`` relative)."""
+        out = np.zeros(self._n)
+        if self._lu is None:
+            return out
+        rhs = self._residual * (1.0 + _EPS)
+        if extra is not None:
+            rhs = rhs + np.maximum(extra[self._live], 0.0)
+        out[self._states] = (1.0 + _SOLVE_MARGIN) * np.maximum(self._lu.solve(rhs), 0.0)
+        return out
+
+
 def chain_reach(
     matrix: sp.csr_matrix, states: np.ndarray, fixed_val: np.ndarray, error: bool = False
-) -> np.ndarray | tuple[np.ndarray, float, float]:
+) -> np.ndarray | tuple[np.ndarray, ChainError]:
     """Least solution of ``x_s = sum_j matrix[i, j] x_j`` for ``s = states[i]``.
+
+    The solve is iteratively refined with residuals in double-double arithmetic
+    (:mod:`planner.imdp.kernels.exact`): slowly mixing chains are ill-conditioned
+    (condition ~ the expected stay), and a plain LU solution can be off by far more than
+    its double-precision residual shows.
 
     Args:
         matrix: ``(len(states), n_states)`` distributions, one row per state of ``states``.
         states: the states being solved for (sorted, distinct).
         fixed_val: ``(n_states,)`` values of all other states (read only there).
-        error: also return the rounding bound: with ``A = I - P`` on the live states
-            (non-singular, ``A^-1 >= 0``) and the residual ``r = A x - b`` of the computed
-            ``x``, the error ``A^-1 r`` is at most ``||A^-1 1||_inf ||r||_inf``; the second
-            solve (``A^-1 1``: expected steps before the chain leaves the live states)
-            reuses the factorisation.
+        error: also return the elementwise rounding bounds (:class:`ChainError`).
 
     Returns:
         ``(n_states,)``: ``fixed_val`` outside ``states``, the reachability values on them;
-        with ``error``, ``(values, steps, residual)``.
+        with ``error``, ``(values, ChainError)``.
     """
     # float dust of the adversary's leftover mass (1e-16) can link a closed class to the
     # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
@@ -90,17 +143,29 @@ def chain_reach(
     inner.eliminate_zeros()
     live = np.flatnonzero(reaching(inner, b > 0))
     out = base
-    steps = resid = 0.0
+    err = ChainError(base.size, live, states[live], None, np.zeros(0))
     if live.size:
         sub = inner[live][:, live]
-        a = (sp.identity(live.size, format="csc") - sub).tocsc()
-        lu = splu(a)
-        x = lu.solve(b[live])
-        if error:
-            steps = float(np.max(np.abs(lu.solve(np.ones(live.size)))))
-            resid = float(np.max(np.abs(a @ x - b[live])))
-        out[states[live]] = np.clip(x, 0.0, 1.0)
-    return (out, steps, resid) if error else out
+        lu = splu((sp.identity(live.size, format="csc") - sub).tocsc())
+        own = states[live].astype(np.int64)
+        rows = matrix[live].tocsr()
+        indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+        out[own] = lu.solve(b[live])
+        r = chain_residual(indptr, indices, rows.data, out, own)
+        for _ in range(_REFINE):
+            if not np.any(r):
+                break
+            out[own] += lu.solve(r)
+            r_new = chain_residual(indptr, indices, rows.data, out, own)
+            if np.max(np.abs(r_new)) >= np.max(np.abs(r)):
+                r = r_new
+                break
+            r = r_new
+        top = np.maximum.reduceat(out[indices], indptr[:-1]) if indices.size else 0.0
+        rounding = _EPS * top + _FLOOR
+        err = ChainError(base.size, live, own, lu, np.abs(r) + rounding)
+        out[own] = np.clip(out[own], 0.0, 1.0)
+    return (out, err) if error else out
 
 
 def strategy_reach_value(
@@ -113,9 +178,9 @@ def strategy_reach_value(
     sound: bool = True,
 ) -> np.ndarray | None:
     """``V_sigma`` of the strategy that plays ``rows`` (one row per free state, sorted),
-    lowered by the error bound of its computation (the solve's residual and the order
-    slack, each times the expected steps; see :func:`chain_reach`) so that it is a lower
-    bound despite rounding.
+    lowered state by state by the error bound of its computation (``A^-1`` applied to the
+    solve's residual plus the order slack's defect; see :class:`ChainError`) so that it
+    is a lower bound despite rounding.
 
     Args:
         model: the interval MDP.
@@ -138,8 +203,8 @@ def strategy_reach_value(
     fixed_val = np.asarray(fixed_val, dtype=np.float64)
     if not adversary_minimizes:
         adv = OrderingAdversary(model, False, rows=rows)
-        x, steps, resid = chain_reach(adv.matrix(start), states, fixed_val, error=True)
-        return _lowered(x, states, steps * (resid + _EPS) if sound else 0.0)
+        x, err = chain_reach(adv.matrix(start), states, fixed_val, error=True)
+        return _lowered(x, err.bound() if sound else None)
     row_mask = np.zeros(model.n_rows, dtype=bool)
     row_mask[rows] = True
     target = fixed_val > 0
@@ -156,15 +221,13 @@ def strategy_reach_value(
     for _ in range(max_rounds):
         matrix = adv.matrix(x)
         sorts = adv.n_sorts
-        x, steps, resid = chain_reach(matrix, states, base, error=True)
+        x, err = chain_reach(matrix, states, base, error=True)
         adv.update(x)
         if adv.n_sorts == sorts:
             # the accepted order may miss the exact minimiser by the slack: its defect at
-            # x, like the solve's residual, costs at most ``steps`` times itself
+            # x is an error of the right-hand side, like the solve's residual
             exact = OrderingAdversary(model, True, rows=rows).expectation(x)
-            defect = float(np.max(matrix @ x - exact, initial=0.0))
-            margin = steps * (resid + max(defect, 0.0) + _EPS)
-            return _lowered(x, states, margin if sound else 0.0)
+            return _lowered(x, err.bound(matrix @ x - exact) if sound else None)
     return None
 
 
@@ -172,7 +235,5 @@ _EPS = 4.0 * np.finfo(float).eps
 """Rounding of the residual itself."""
 
 
-def _lowered(x: np.ndarray, states: np.ndarray, margin: float) -> np.ndarray:
-    out = x.copy()
-    out[states] = np.maximum(x[states] - margin, 0.0)
-    return out
+def _lowered(x: np.ndarray, margin: np.ndarray | None) -> np.ndarray:
+    return x.copy() if margin is None else np.maximum(x - margin, 0.0)

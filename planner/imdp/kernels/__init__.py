@@ -1,9 +1,10 @@
 """Compiled (numba) kernels for the sequential parts of robust value iteration and of the
 graph analyses: the robust expectation of a row (:mod:`.rows`), Gauss-Seidel sweeps and
-their layout (:mod:`.sweeps`), end components (:mod:`.components`) and graph searches
-(:mod:`.search`)."""
+their layout (:mod:`.sweeps`), end components (:mod:`.components`), graph searches
+(:mod:`.search`) and double-double residuals of strategy evaluation (:mod:`.exact`)."""
 
 from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
+from planner.imdp.kernels.exact import chain_residual
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     backward_distance,
@@ -19,6 +20,7 @@ __all__ = [
     "ReachSweeper",
     "all_row_values",
     "backward_distance",
+    "chain_residual",
     "component_exit_bound",
     "counting_order",
     "gather_rows",

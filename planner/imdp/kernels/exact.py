@@ -1,0 +1,56 @@
+"""Residuals of sparse linear systems in double-double arithmetic, compiled.
+
+Strategy evaluation solves ``x = P x + b`` for chains that can mix very slowly (expected
+stays of ``1e8`` steps in the free states of a grid product): the LU solution's forward
+error is then up to ``1e8`` times its backward error, ``1e-8`` in double precision, and
+residuals computed in double precision cannot see it. A residual accumulated without
+rounding error (error-free transformations: Knuth's TwoSum, Dekker's split product; the
+sum carried as an unevaluated pair ``hi + lo``, about 106 bits) lets iterative refinement
+recover the solution to double precision and bounds its error elementwise.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_SPLIT = 134217729.0  # 2**27 + 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _two_sum(a: float, b: float) -> tuple[float, float]:
+    """``a + b = s + e`` exactly (Knuth)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _two_prod(a: float, b: float) -> tuple[float, float]:
+    """``a * b = p + e`` exactly (Dekker's split into 26-bit halves)."""
+    p = a * b
+    c = _SPLIT * a
+    ah = c - (c - a)
+    al = a - ah
+    c = _SPLIT * b
+    bh = c - (c - b)
+    bl = b - bh
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_residual(indptr, indices, data, y, own) -> np.ndarray:
+    """``r_i = sum_k data[k] * y[indices[k]] - y[own[i]]`` over the CSR rows ``i``,
+    accumulated in double-double and rounded once (error at most ``2**-52 |r_i| + 2**-100``
+    times the row's absolute sum, for rows of probabilities and values in ``[0, 1]``)."""
+    n = indptr.size - 1
+    r = np.empty(n)
+    for i in range(n):
+        hi = -y[own[i]]
+        lo = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            p, pe = _two_prod(data[k], y[indices[k]])
+            hi, e = _two_sum(hi, p)
+            lo += e + pe
+        r[i] = hi + lo
+    return r

@@ -1,0 +1,78 @@
+"""Strategy evaluation by sparse solves: refinement and elementwise rounding bounds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from planner.imdp.evaluate import chain_reach
+from planner.imdp.kernels import chain_residual
+
+
+def _cycle(rng: np.random.Generator, n: int, leak: float) -> sp.csr_matrix:
+    """``n`` states circulating in a random cycle (each also jumping 7 ahead), every one
+    leaking ``leak`` to the goal (column ``n``) and ``2 leak`` to a sink (``n + 1``):
+    every value is exactly 1/3 and the expected stay is about ``1 / (3 leak)`` steps."""
+    perm = rng.permutation(n)
+    rows, cols, vals = [], [], []
+    for k in range(n):
+        w = rng.uniform(0.2, 0.8)
+        i = perm[k]
+        rows += [i] * 4
+        cols += [perm[(k + 1) % n], perm[(k + 7) % n], n, n + 1]
+        vals += [(1 - 3 * leak) * w, (1 - 3 * leak) * (1 - w), leak, 2 * leak]
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n + 2))
+
+
+@pytest.mark.parametrize("leak", [1e-6, 1e-8, 1e-10])
+def test_bound_covers_the_error_of_an_ill_conditioned_chain(leak):
+    n = 200
+    p = _cycle(np.random.default_rng(3), n, leak)
+    fixed = np.zeros(n + 2)
+    fixed[n] = 1.0
+    x, err = chain_reach(p, np.arange(n), fixed, error=True)
+    bound = err.bound()
+    off = np.abs(x[:n] - 1 / 3)
+    assert np.all(off <= bound[:n])
+    # the bound is a few times the rounding of the chain's own rows (4 eps per step), not
+    # a blanket: 1e-10 leaks give ~3e9 steps
+    assert bound[:n].max() < 20 * np.finfo(float).eps / (3 * leak)
+    assert x[n:].tolist() == [1.0, 0.0]  # the fixed values are kept
+
+
+def test_bound_is_small_where_the_slow_part_has_small_values():
+    # H (0): half to the goal, half into a trap cycle T (2..11) that circulates for ~5e8
+    # steps and leaks 1e-9 to a low state W (1) and 1e-9 to the sink; W reaches the goal
+    # with 1e-6. Values: W = 1e-6, T = W / 2, H = 1/2 + T / 2.
+    n_t = 10
+    n = 2 + n_t
+    goal, sink = n, n + 1
+    dense = np.zeros((n, n + 2))
+    dense[0, goal] = dense[0, 2] = 0.5
+    dense[1, goal], dense[1, sink] = 1e-6, 1 - 1e-6
+    for k in range(n_t):
+        s = 2 + k
+        dense[s, 2 + (k + 1) % n_t] = 1 - 2e-9
+        dense[s, 1] = dense[s, sink] = 1e-9
+    fixed = np.zeros(n + 2)
+    fixed[goal] = 1.0
+    x, err = chain_reach(sp.csr_matrix(dense), np.arange(n), fixed, error=True)
+    exact = np.concatenate(([0.5 + 0.25e-6, 1e-6], np.full(n_t, 0.5e-6)))
+    bound = err.bound()[:n]
+    assert np.all(np.abs(x[:n] - exact) <= bound)
+    steps = np.linalg.solve(np.eye(n) - dense[:, :n], np.ones(n))
+    assert steps.max() > 1e8  # a norm bound (steps x 4 eps) would be ~2e-7 everywhere
+    assert bound[0] < 1e-12 and bound.max() < 1e-12
+
+
+def test_residual_is_exact_where_double_precision_cancels():
+    # 1 - (1 - 1e-17) - 1e-17 ... in double the first sum already rounds away the 1e-17
+    indptr = np.array([0, 2])
+    indices = np.array([1, 2])
+    data = np.array([0.5, 0.5])
+    y = np.array([0.5 + 1e-17, 1.0, 1e-16])
+    # exact: 0.5 * 1 + 0.5 * 1e-16 - y[0] = 5e-17 - 1e-17 (y[0] rounds to 0.5) = 5e-17
+    r = chain_residual(indptr, indices, data, y, np.array([0]))
+    assert r[0] == pytest.approx(5e-17, rel=1e-12)
+    assert 0.5 * 1.0 + 0.5 * 1e-16 - y[0] == 0.0  # what double precision gives
