@@ -82,10 +82,14 @@ class ChainError:
     ``||A^-1 1|| ||r||`` (``1e8`` steps times ``1e-16`` on a slowly mixing chain).
 
     The chain's probabilities are themselves rounded (an adversary's distribution is
-    computed, not exact): each row's expectation is taken to be off by up to ``4 eps``
-    times the largest value among its successors, an error of the right-hand side like the
-    residual. Both scale with the values, so states that circulate
-    for long among states of tiny value keep a tiny bound.
+    computed, not exact): the lower bounds and full gaps it hands out are rounded by at most
+    ``eps`` relative, the critical entry (the remaining mass, ``1 - sum(l)`` less a prefix
+    sum of gaps) by up to ``k eps`` absolute for ``k`` successors, and any mass the rounding
+    adds or loses sits on a successor of value at most the row's largest. Each row's
+    expectation is therefore taken to be off by up to ``(k + 4) eps`` times the largest
+    value among its successors, an error of the right-hand side like the residual. Both
+    scale with the values, so states that circulate for long among states of tiny value
+    keep a tiny bound.
     """
 
     def __init__(
@@ -162,7 +166,7 @@ def chain_reach(
                 break
             r = r_new
         top = np.maximum.reduceat(out[indices], indptr[:-1]) if indices.size else 0.0
-        rounding = _EPS * top + _FLOOR
+        rounding = (np.diff(indptr) + 4.0) * np.finfo(float).eps * top + _FLOOR
         err = ChainError(base.size, live, own, lu, np.abs(r) + rounding)
         out[own] = np.clip(out[own], 0.0, 1.0)
     return (out, err) if error else out

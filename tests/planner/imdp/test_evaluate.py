@@ -35,9 +35,9 @@ def test_bound_covers_the_error_of_an_ill_conditioned_chain(leak):
     bound = err.bound()
     off = np.abs(x[:n] - 1 / 3)
     assert np.all(off <= bound[:n])
-    # the bound is a few times the rounding of the chain's own rows (4 eps per step), not
+    # the bound is a few times the rounding of the chain's own rows ((k + 4) eps per step), not
     # a blanket: 1e-10 leaks give ~3e9 steps
-    assert bound[:n].max() < 20 * np.finfo(float).eps / (3 * leak)
+    assert bound[:n].max() < 40 * np.finfo(float).eps / (3 * leak)
     assert x[n:].tolist() == [1.0, 0.0]  # the fixed values are kept
 
 
