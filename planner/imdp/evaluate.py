@@ -87,7 +87,8 @@ class ChainError:
     sum of gaps) by up to ``k eps`` absolute for ``k`` successors, and any mass the rounding
     adds or loses sits on a successor of value at most the row's largest. Each row's
     expectation is therefore taken to be off by up to ``(k + 4) eps`` times the largest
-    value among its successors, an error of the right-hand side like the residual. Both
+    value among its successors (:func:`row_rounding`), an error of the right-hand side like
+    the residual. Both
     scale with the values, so states that circulate for long among states of tiny value
     keep a tiny bound.
     """
@@ -165,11 +166,71 @@ def chain_reach(
                 r = r_new
                 break
             r = r_new
-        top = np.maximum.reduceat(out[indices], indptr[:-1]) if indices.size else 0.0
-        rounding = (np.diff(indptr) + 4.0) * np.finfo(float).eps * top + _FLOOR
+        rounding = row_rounding(indptr, indices, out)
         err = ChainError(base.size, live, own, lu, np.abs(r) + rounding)
         out[own] = np.clip(out[own], 0.0, 1.0)
     return (out, err) if error else out
+
+
+def row_rounding(
+    indptr: np.ndarray, indices: np.ndarray, values: np.ndarray, per_entry: float = 1.0
+) -> np.ndarray:
+    """Per CSR row of distributions: ``(per_entry k + 4) eps`` times the largest
+    ``|values|`` of its ``k`` entries, plus the double-double floor. ``per_entry = 1``:
+    the rounding of an adversary's computed distribution (:class:`ChainError`); ``3``: of
+    a compiled row evaluation as well (its sums of ``k`` products)."""
+    lens = np.diff(indptr)
+    top = np.zeros(lens.size)
+    full = lens > 0
+    if indices.size:
+        top[full] = np.maximum.reduceat(np.abs(values[indices]), indptr[:-1][full])
+    return (per_entry * lens + 4.0) * np.finfo(float).eps * top + _FLOOR
+
+
+def _settled_chain(
+    model: IMDP,
+    rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    start: np.ndarray,
+    max_rounds: int,
+) -> tuple[np.ndarray, ChainError | None, sp.csr_matrix | None, np.ndarray] | None:
+    """The chain of ``rows`` and the adversary's best response, solved: ``(x, error,
+    matrix, defect)`` (``matrix`` one row per strategy row that keeps a chance of the
+    targets, ``defect`` the order slack's error of each), or ``None`` when the adversary
+    did not settle."""
+    rows = np.asarray(rows, dtype=np.int64)
+    states = model.row_state[rows]
+    fixed_val = np.asarray(fixed_val, dtype=np.float64)
+    if not adversary_minimizes:
+        adv = OrderingAdversary(model, False, rows=rows)
+        matrix = adv.matrix(start)
+        x, err = chain_reach(matrix, states, fixed_val, error=True)
+        return x, err, matrix, np.zeros(rows.size)
+    row_mask = np.zeros(model.n_rows, dtype=bool)
+    row_mask[rows] = True
+    target = fixed_val > 0
+    target[states] = False
+    pos, _ = graph.robust_positive_reach(model, target, rows=row_mask)
+    keep = pos[states]
+    base = fixed_val.copy()
+    base[states] = 0.0
+    if not keep.any():
+        return base, None, None, np.zeros(0)
+    rows, states = rows[keep], states[keep]
+    adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
+    x = np.where(pos, start, base)
+    for _ in range(max_rounds):
+        matrix = adv.matrix(x)
+        sorts = adv.n_sorts
+        x, err = chain_reach(matrix, states, base, error=True)
+        adv.update(x)
+        if adv.n_sorts == sorts:
+            # the accepted order may miss the exact minimiser by the slack: its defect at
+            # x is an error of the right-hand side, like the solve's residual
+            exact = OrderingAdversary(model, True, rows=rows).expectation(x)
+            return x, err, matrix, np.maximum(matrix @ x - exact, 0.0)
+    return None
 
 
 def strategy_reach_value(
@@ -202,42 +263,54 @@ def strategy_reach_value(
         ``(n_states,)`` values, or ``None`` when the adversary did not settle within
         ``max_rounds`` (no bound is then claimed).
     """
-    rows = np.asarray(rows, dtype=np.int64)
-    states = model.row_state[rows]
-    fixed_val = np.asarray(fixed_val, dtype=np.float64)
-    if not adversary_minimizes:
-        adv = OrderingAdversary(model, False, rows=rows)
-        x, err = chain_reach(adv.matrix(start), states, fixed_val, error=True)
-        return _lowered(x, err.bound() if sound else None)
-    row_mask = np.zeros(model.n_rows, dtype=bool)
-    row_mask[rows] = True
-    target = fixed_val > 0
-    target[states] = False
-    pos, _ = graph.robust_positive_reach(model, target, rows=row_mask)
-    keep = pos[states]
-    base = fixed_val.copy()
-    base[states] = 0.0
-    if not keep.any():
-        return base
-    rows, states = rows[keep], states[keep]
-    adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
-    x = np.where(pos, start, base)
-    for _ in range(max_rounds):
-        matrix = adv.matrix(x)
-        sorts = adv.n_sorts
-        x, err = chain_reach(matrix, states, base, error=True)
-        adv.update(x)
-        if adv.n_sorts == sorts:
-            # the accepted order may miss the exact minimiser by the slack: its defect at
-            # x is an error of the right-hand side, like the solve's residual
-            exact = OrderingAdversary(model, True, rows=rows).expectation(x)
-            return _lowered(x, err.bound(matrix @ x - exact) if sound else None)
-    return None
+    out = _settled_chain(model, rows, fixed_val, adversary_minimizes, start, max_rounds)
+    if out is None:
+        return None
+    x, err, _, defect = out
+    if err is None or not sound:
+        return x.copy()
+    return np.maximum(x - err.bound(defect), 0.0)
 
 
 _EPS = 4.0 * np.finfo(float).eps
 """Rounding of the residual itself."""
 
 
-def _lowered(x: np.ndarray, margin: np.ndarray | None) -> np.ndarray:
-    return x.copy() if margin is None else np.maximum(x - margin, 0.0)
+def stay_allowance(
+    model: IMDP,
+    rows: np.ndarray,
+    upper: np.ndarray,
+    adversary_minimizes: bool,
+    per_step: float,
+) -> np.ndarray:
+    """``A^-1 a`` for the chain of the strategy ``rows`` (one row per free state, sorted)
+    and the ordering adversary at ``upper``: the allowance ``a = per_step + m`` (``m``:
+    :func:`row_rounding` at ``upper``, a bound on the rounding of each evaluation) summed
+    over the expected stay among the free states of positive ``upper`` (states at 0 count
+    as left: their rows' values and margins are 0), shape ``(n_states,)``. States from
+    which the chain never leaves the free states get 0: the strategy's value there is 0.
+
+    A check that accepts ``T(U) <= U + e`` per state (floating-point noise of ``e`` per
+    evaluation) certifies less than ``T(U) <= U``: along a strategy ``sigma`` with its
+    adversary ``P``, ``U >= P U - e`` gives ``U >= V_sigma - A^-1 e`` only (``A = I - P``
+    on the states the chain leaves; on a closed class ``V_sigma = 0 <= U``); on a chain
+    that stays ``1e7`` steps, ``1e-15`` per step is ``1e-8``.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    states = model.row_state[rows]
+    matrix = OrderingAdversary(model, adversary_minimizes, rows=rows).matrix(upper)
+    matrix = sp.csr_matrix(matrix, copy=True)
+    positive = upper[states] > 0.0
+    rows, states = rows[positive], states[positive]
+    matrix = matrix[positive]
+    a = per_step + row_rounding(matrix.indptr, matrix.indices, upper, per_entry=3.0)
+    inner = matrix[:, states].tocsr()
+    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
+    transient = reaching(inner, leak > _DUST)
+    out = np.zeros(model.n_states)
+    idx = np.flatnonzero(transient)
+    if idx.size:
+        sub = inner[idx][:, idx]
+        lu = splu((sp.identity(idx.size, format="csc") - sub).tocsc())
+        out[states[idx]] = (1.0 + _SOLVE_MARGIN) * np.maximum(lu.solve(a[idx]), 0.0)
+    return out

@@ -88,7 +88,7 @@ def gauss_seidel_sweep(
     return residual
 
 
-_ROUNDING = 1e-15
+ROUNDING = 1e-15
 """Slack of :func:`upper_sweep`'s check for floating-point rounding."""
 
 
@@ -113,7 +113,7 @@ def upper_sweep(
     violation; the pass is then a candidate's repair, not a bound). Returns
     ``(max decrease, violations)``.
 
-    A value above ``U(s)`` by at most ``_ROUNDING`` (1e-15, floating-point noise of the
+    A value above ``U(s)`` by at most ``ROUNDING`` (1e-15, floating-point noise of the
     row sums) keeps ``U(s)`` without counting.
     A pass with no violation certifies the final ``U`` as superharmonic, ``T(U) <= U``:
     each state's value was computed from values at least the final ones (they only
@@ -149,7 +149,7 @@ def upper_sweep(
             u[s] = best
             if old - best > decrease:
                 decrease = old - best
-        elif best > old + _ROUNDING:
+        elif best > old + ROUNDING:
             violations += 1
             if raise_violations:
                 u[s] = best

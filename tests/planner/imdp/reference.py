@@ -107,11 +107,14 @@ def ref_discounted(
     return np.array(v)
 
 
-def slow_leak_imdp(rng: np.random.Generator, n_states: int = 7, leak: float = 1e-5) -> IMDP:
+def slow_leak_imdp(
+    rng: np.random.Generator, n_states: int = 7, leak: float = 1e-5, tolerance: float = 1e-9
+) -> IMDP:
     """Random IMDP whose states keep ``1 - leak`` of their mass on themselves: value
     iteration from 0 creeps up by about ``leak`` per sweep. State 0 is a sink, state 1 the
     (absorbing) goal; the other states have two actions, each with a forced (``lower > 0``)
-    leak into the sink, so no state but the goal has value 1."""
+    leak into the sink, so no state but the goal has value 1. ``tolerance``: the model's
+    bound tolerance (forced masses below it count as 0 in the graph analyses)."""
     s, a, t, lo, up = [0, 1], [0, 0], [0, 1], [1.0, 1.0], [1.0, 1.0]
     for q in range(2, n_states):
         for act in range(2):
@@ -128,9 +131,8 @@ def slow_leak_imdp(rng: np.random.Generator, n_states: int = 7, leak: float = 1e
             t += [*succ.tolist(), q]
             lo += [*lower.tolist(), 1.0 - 3 * leak]
             up += [*upper.tolist(), 1.0 - 0.5 * leak]
-    return IMDP(
-        n_states, s, a, t, lo, up, n_actions=2, labels=[(), ("goal",)] + [()] * (n_states - 2)
-    )
+    labels = [(), ("goal",)] + [()] * (n_states - 2)
+    return IMDP(n_states, s, a, t, lo, up, n_actions=2, labels=labels, tolerance=tolerance)
 
 
 def _robust_positive(rows: dict, target: np.ndarray, strategy: dict[int, int]) -> np.ndarray:
@@ -225,3 +227,73 @@ def ref_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
             best, ref_strategy_value(model, target, dict(zip(free, combo, strict=True)))
         )
     return best
+
+
+def exact_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, int]) -> list:
+    """Worst-case reachability value of a memoryless strategy in exact rational arithmetic
+    (the floats of the model taken as the exact binary fractions they are), for models in
+    which every strategy row leaks into a value-0 sink with a positive lower bound (no end
+    components besides the sink: the Bellman operator has one fixed point). States without
+    a path to the target are 0. Adversary policy iteration:
+    sort the successors by value, hand out the remaining mass in that order, solve the
+    chain exactly (Gauss-Jordan over ``Fraction``), until the values repeat."""
+    from fractions import Fraction
+
+    rows = rows_of(model)
+    n = model.n_states
+    val = [Fraction(1) if target[q] else Fraction(0) for q in range(n)]
+    reach = target.copy()  # states with a path (upper > 0) to the target; the rest are 0
+    changed = True
+    while changed:
+        changed = False
+        for q, act in strategy.items():
+            if not reach[q] and any(up > 0 and reach[j] for j, _, up in rows[(q, act)]):
+                reach[q] = changed = True
+    free = [q for q in strategy if reach[q] and not target[q]]
+    exact_rows = {
+        q: [(j, Fraction(lo), Fraction(up)) for j, lo, up in rows[(q, strategy[q])]] for q in free
+    }
+    idx = {q: i for i, q in enumerate(free)}
+    k = len(free)
+    for _ in range(100):
+        mat = [[Fraction(0)] * (k + 1) for _ in range(k)]
+        for q in free:
+            i = idx[q]
+            mat[i][i] += 1
+            rem = 1 - sum(lo for _, lo, _ in exact_rows[q])
+            for j, lo, up in sorted(exact_rows[q], key=lambda e: val[e[0]]):
+                p = lo + min(up - lo, max(rem, Fraction(0)))
+                rem -= p - lo
+                if j in idx:
+                    mat[i][idx[j]] -= p
+                else:
+                    mat[i][k] += p * val[j]
+        for c in range(k):
+            piv = next(r for r in range(c, k) if mat[r][c] != 0)
+            mat[c], mat[piv] = mat[piv], mat[c]
+            for r in range(k):
+                if r != c and mat[r][c] != 0:
+                    f = mat[r][c] / mat[c][c]
+                    mat[r] = [a - f * b for a, b in zip(mat[r], mat[c], strict=True)]
+        new = list(val)
+        for q in free:
+            new[q] = mat[idx[q]][k] / mat[idx[q]][idx[q]]
+        if new == val:
+            return val
+        val = new
+    raise AssertionError("adversary policy iteration did not settle")
+
+
+def exact_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
+    """Worst-case maximal reachability, the best memoryless strategy's exact value
+    (:func:`exact_strategy_value`), rounded to float at the end."""
+    from itertools import product as cartesian
+
+    rows = rows_of(model)
+    free = [q for q in range(model.n_states) if not target[q]]
+    choices = [sorted(a for (s, a) in rows if s == q) for q in free]
+    best = None
+    for combo in cartesian(*choices):
+        v = exact_strategy_value(model, target, dict(zip(free, combo, strict=True)))
+        best = v if best is None else [max(a, b) for a, b in zip(best, v, strict=True)]
+    return np.array([float(x) for x in best])
