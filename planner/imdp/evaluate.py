@@ -282,6 +282,7 @@ def stay_allowance(
     upper: np.ndarray,
     adversary_minimizes: bool,
     per_step: float,
+    direct_limit: int = 20_000,
 ) -> np.ndarray:
     """``A^-1 a`` for the chain of the strategy ``rows`` (one row per free state, sorted)
     and the ordering adversary at ``upper``: the allowance ``a = per_step + m`` (``m``:
@@ -289,6 +290,8 @@ def stay_allowance(
     over the expected stay among the free states of positive ``upper`` (states at 0 count
     as left: their rows' values and margins are 0), shape ``(n_states,)``. States from
     which the chain never leaves the free states get 0: the strategy's value there is 0.
+    Sparse LU for at most ``direct_limit`` states, else a checked supersolution of Jacobi
+    sweeps (``inf`` where none is found).
 
     A check that accepts ``T(U) <= U + e`` per state (floating-point noise of ``e`` per
     evaluation) certifies less than ``T(U) <= U``: along a strategy ``sigma`` with its
@@ -311,6 +314,31 @@ def stay_allowance(
     idx = np.flatnonzero(transient)
     if idx.size:
         sub = inner[idx][:, idx]
-        lu = splu((sp.identity(idx.size, format="csc") - sub).tocsc())
-        out[states[idx]] = (1.0 + _SOLVE_MARGIN) * np.maximum(lu.solve(a[idx]), 0.0)
+        if idx.size <= direct_limit:
+            lu = splu((sp.identity(idx.size, format="csc") - sub).tocsc())
+            out[states[idx]] = (1.0 + _SOLVE_MARGIN) * np.maximum(lu.solve(a[idx]), 0.0)
+        else:
+            out[states[idx]] = _stay_supersolution(sub.tocsr(), a[idx])
     return out
+
+
+_STAY_SWEEPS = 2_000
+"""Jacobi sweeps of the expected stay on models too large for a sparse LU."""
+
+
+def _stay_supersolution(sub: sp.csr_matrix, a: np.ndarray) -> np.ndarray:
+    """An upper bound of ``(I - sub)^-1 a`` without a factorisation: Jacobi sweeps
+    ``w <- a + sub w`` from ``a`` until they change by under 1e-3 relative, then ``1.05 w``
+    is kept if it is a supersolution, ``a + sub (1.05 w) <= 1.05 w`` (then it bounds the
+    least solution); ``inf`` where that fails or the sweeps run out."""
+    w = a.copy()
+    for _ in range(_STAY_SWEEPS):
+        nxt = a + sub @ w
+        done = np.max(nxt - w) <= 1e-3 * np.max(nxt)
+        w = nxt
+        if done:
+            cand = 1.05 * w
+            if np.all(a + sub @ cand <= cand):
+                return cand
+            break
+    return np.full(a.size, np.inf)

@@ -350,7 +350,7 @@ def rounding_widened(
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
         rows = np.sort(choice[st])
-    allowance = stay_allowance(m, rows, upper, adversary_minimizes, ROUNDING)
+    allowance = stay_allowance(m, rows, upper, adversary_minimizes, ROUNDING, _SI_MAX_STATES)
     out = upper.copy()
     out[st] = np.minimum(1.0, upper[st] + allowance[st])
     return out
@@ -369,11 +369,14 @@ def shortest_stay(
     number of steps from the strategy ``start`` (one of ``rows`` per state, in state
     order), each row's distribution the ordering adversary's at ``upper`` (``rounds``
     evaluations at most; a state whose chain never leaves counts as staying for ever).
+    ``start`` itself on models of more than ``_SI_MAX_STATES`` states (no sparse LU).
     """
     rs = m.row_state[rows]
     seg = first_of_runs(rs)
     seg_id = np.cumsum(np.isin(np.arange(rs.size), seg)) - 1
     states = rs[seg]
+    if states.size > _SI_MAX_STATES:
+        return np.sort(start)  # no sparse LU on models this large
     matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=rows).matrix(upper))
     pos = np.full(m.n_states, -1, dtype=np.int64)
     pos[states] = np.arange(states.size)
