@@ -151,10 +151,11 @@ def main() -> None:
     separated = [  # certified: the decoupled lower end above the product-interval upper end
         n for n, r in results.items() if r["d"].lower[r["init"]] > r["p"].upper[r["init"]] + 1e-8
     ]
+    sizes = ", ".join(map(str, higher)) + " hops" if higher else "none of the data sizes"
+    disjoint = ", ".join(map(str, separated)) + " hops" if separated else "none"
     print(
         f"decoupled never below product-interval (all states, 1e-8): {never_lower}; strictly "
-        f"higher at the start after {higher or 'no'} hops of data (brackets disjoint at "
-        f"{separated or 'no'} hops)"
+        f"higher at the start after: {sizes} (brackets disjoint: {disjoint})"
     )
 
 

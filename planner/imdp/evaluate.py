@@ -30,7 +30,7 @@ from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
 from planner.imdp.kernels import chain_residual
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 
 ORDER_SLACK = 1e-13
@@ -284,14 +284,27 @@ def stay_allowance(
     per_step: float,
     direct_limit: int = 20_000,
 ) -> np.ndarray:
-    """``A^-1 a`` for the chain of the strategy ``rows`` (one row per free state, sorted)
-    and the ordering adversary at ``upper``: the allowance ``a = per_step + m`` (``m``:
-    :func:`row_rounding` at ``upper``, a bound on the rounding of each evaluation) summed
-    over the expected stay among the free states of positive ``upper`` (states at 0 count
-    as left: their rows' values and margins are 0), shape ``(n_states,)``. States from
-    which the chain never leaves the free states get 0: the strategy's value there is 0.
-    Sparse LU for at most ``direct_limit`` states, else a checked supersolution of Jacobi
-    sweeps (``inf`` where none is found).
+    """:func:`chain_stay_allowance` for the chain of the strategy ``rows`` (one row per
+    free state, sorted) and the ordering adversary at ``upper``."""
+    rows = np.asarray(rows, dtype=np.int64)
+    matrix = OrderingAdversary(model, adversary_minimizes, rows=rows).matrix(upper)
+    return chain_stay_allowance(matrix, model.row_state[rows], upper, per_step, direct_limit)
+
+
+def chain_stay_allowance(
+    matrix: sp.csr_matrix,
+    states: np.ndarray,
+    upper: np.ndarray,
+    per_step: float,
+    direct_limit: int = 20_000,
+) -> np.ndarray:
+    """``A^-1 a`` for the chain ``matrix`` (one distribution per state of ``states``, over
+    all states): the allowance ``a = per_step + m`` (``m``: :func:`row_rounding` at
+    ``upper``, a bound on the rounding of each evaluation) summed over the expected stay
+    among the ``states`` of positive ``upper`` (states at 0 count as left: their rows'
+    values and margins are 0), shape ``(n_states,)``. States from which the chain never
+    leaves get 0: the strategy's value there is 0. Sparse LU for at most ``direct_limit``
+    states, else a checked supersolution of Jacobi sweeps (``inf`` where none is found).
 
     A check that accepts ``T(U) <= U + e`` per state (floating-point noise of ``e`` per
     evaluation) certifies less than ``T(U) <= U``: along a strategy ``sigma`` with its
@@ -299,18 +312,16 @@ def stay_allowance(
     on the states the chain leaves; on a closed class ``V_sigma = 0 <= U``); on a chain
     that stays ``1e7`` steps, ``1e-15`` per step is ``1e-8``.
     """
-    rows = np.asarray(rows, dtype=np.int64)
-    states = model.row_state[rows]
-    matrix = OrderingAdversary(model, adversary_minimizes, rows=rows).matrix(upper)
     matrix = sp.csr_matrix(matrix, copy=True)
+    states = np.asarray(states, dtype=np.int64)
     positive = upper[states] > 0.0
-    rows, states = rows[positive], states[positive]
+    states = states[positive]
     matrix = matrix[positive]
     a = per_step + row_rounding(matrix.indptr, matrix.indices, upper, per_entry=3.0)
     inner = matrix[:, states].tocsr()
     leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
     transient = reaching(inner, leak > _DUST)
-    out = np.zeros(model.n_states)
+    out = np.zeros(upper.size)
     idx = np.flatnonzero(transient)
     if idx.size:
         sub = inner[idx][:, idx]
@@ -320,6 +331,49 @@ def stay_allowance(
         else:
             out[states[idx]] = _stay_supersolution(sub.tocsr(), a[idx])
     return out
+
+
+def shortest_stay_choice(
+    matrix: sp.csr_matrix, row_states: np.ndarray, start: np.ndarray, rounds: int = 8
+) -> np.ndarray:
+    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
+    over all states; ``row_states`` their states, sorted, at least one per state), chosen
+    to keep the expected stay among these states short: policy iteration for the minimal
+    expected number of steps from ``start`` (a candidate index per state, in state order),
+    ``rounds`` evaluations at most; a state whose chain never leaves counts as staying for
+    ever. Returns candidate indices, one per state."""
+    rs = np.asarray(row_states, dtype=np.int64)
+    seg = first_of_runs(rs)
+    seg_id = np.cumsum(np.isin(np.arange(rs.size), seg)) - 1
+    states = rs[seg]
+    matrix = sp.csr_matrix(matrix)
+    pos = np.full(matrix.shape[1], -1, dtype=np.int64)
+    pos[states] = np.arange(states.size)
+    cols = np.flatnonzero(pos >= 0)
+    # rows restricted to the states themselves (mass elsewhere leaves)
+    inner = matrix[:, cols].tocsr()
+    inner = sp.csr_matrix(
+        (inner.data, pos[cols][inner.indices], inner.indptr), shape=(rs.size, states.size)
+    )
+    choice = np.asarray(start, dtype=np.int64)
+    for _ in range(rounds):
+        sub = inner[choice]
+        leak = 1.0 - np.asarray(sub.sum(axis=1)).ravel()
+        live = reaching(sub, leak > _DUST)
+        w = np.full(states.size, 1e300)
+        idx = np.flatnonzero(live)
+        if idx.size:
+            a = (sp.identity(idx.size, format="csc") - sub[idx][:, idx]).tocsc()
+            w[idx] = splu(a).solve(np.ones(idx.size))
+        cost = 1.0 + inner @ w
+        best = np.minimum.reduceat(cost, seg)
+        better = best < cost[choice] * (1.0 - 1e-9)
+        if not better.any():
+            break
+        top = np.flatnonzero(cost <= best[seg_id])
+        top = top[first_of_runs(seg_id[top])]
+        choice = np.where(better, top, choice)
+    return choice
 
 
 _STAY_SWEEPS = 2_000

@@ -43,11 +43,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from planner.imdp import certify, strategy
-from planner.imdp.evaluate import reaching, stay_allowance
+from planner.imdp.evaluate import shortest_stay_choice, stay_allowance
 from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.kernels.sweeps import ROUNDING
@@ -362,49 +360,14 @@ def shortest_stay(
     start: np.ndarray,
     adversary_minimizes: bool,
     upper: np.ndarray,
-    rounds: int = 8,
 ) -> np.ndarray:
-    """One of ``rows`` (sorted, at least one per state) per state, chosen to keep the
-    expected stay among these states short: policy iteration for the minimal expected
-    number of steps from the strategy ``start`` (one of ``rows`` per state, in state
-    order), each row's distribution the ordering adversary's at ``upper`` (``rounds``
-    evaluations at most; a state whose chain never leaves counts as staying for ever).
-    ``start`` itself on models of more than ``_SI_MAX_STATES`` states (no sparse LU).
-    """
+    """One of ``rows`` (sorted, at least one per state) per state of short expected stay
+    (:func:`planner.imdp.evaluate.shortest_stay_choice`, each row's distribution the
+    ordering adversary's at ``upper``) from the strategy ``start`` (one of ``rows`` per
+    state, in state order); ``start`` itself on models of more than ``_SI_MAX_STATES``
+    states (no sparse LU)."""
     rs = m.row_state[rows]
-    seg = first_of_runs(rs)
-    seg_id = np.cumsum(np.isin(np.arange(rs.size), seg)) - 1
-    states = rs[seg]
-    if states.size > _SI_MAX_STATES:
-        return np.sort(start)  # no sparse LU on models this large
-    matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=rows).matrix(upper))
-    pos = np.full(m.n_states, -1, dtype=np.int64)
-    pos[states] = np.arange(states.size)
-    inside = pos >= 0
-    # rows restricted to the states themselves (mass elsewhere leaves)
-    inner = matrix[:, np.flatnonzero(inside)].tocsr()
-    inner = sp.csr_matrix(
-        (inner.data, pos[np.flatnonzero(inside)][inner.indices], inner.indptr),
-        shape=(rows.size, states.size),
-    )
-    choice = np.searchsorted(rows, start)
-    for _ in range(rounds):
-        sub = inner[choice]
-        leak = 1.0 - np.asarray(sub.sum(axis=1)).ravel()
-        live = reaching(sub, leak > 1e-12)
-        w = np.full(states.size, np.inf)
-        idx = np.flatnonzero(live)
-        if idx.size:
-            a = (sp.identity(idx.size, format="csc") - sub[idx][:, idx]).tocsc()
-            w[idx] = splu(a).solve(np.ones(idx.size))
-        wf = np.where(np.isfinite(w), w, 1e300)
-        cost = 1.0 + inner @ wf
-        best = np.minimum.reduceat(cost, seg)
-        cur = cost[choice]
-        better = best < cur * (1.0 - 1e-9)
-        if not better.any():
-            break
-        top = np.flatnonzero(cost <= best[seg_id])
-        top = top[first_of_runs(seg_id[top])]
-        choice = np.where(better, top, choice)
-    return rows[choice]
+    if first_of_runs(rs).size > _SI_MAX_STATES:
+        return np.sort(start)
+    matrix = OrderingAdversary(m, adversary_minimizes, rows=rows).matrix(upper)
+    return rows[shortest_stay_choice(matrix, rs, np.searchsorted(rows, start))]

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from planner.imdp.kernels.sweeps import ROUNDING
+
 
 @numba.njit(cache=True, nogil=True)
 def vertices(ptr, lo, up, rows, tol):
@@ -177,7 +179,7 @@ def sweep(
             v[s] = best
             if old - best > change:
                 change = old - best
-        elif best > old + 1e-15:
+        elif best > old + ROUNDING:
             bad += 1
             if raise_bad:
                 v[s] = best

@@ -13,6 +13,7 @@ from planner.imdp.decoupled.reach import (
     certify_candidate,
     expanded_imdp,
     expanded_size,
+    rounding_widened,
     solve_reach,
     strategy_iteration,
 )
@@ -134,7 +135,12 @@ class DecoupledProduct:
         direct = (
             replace(alg, max_iterations=min(alg.max_iterations, _DIRECT_SWEEPS)) if small else alg
         )
-        sol = solve_reach(self.model, target, None, pessimistic, direct)
+        sol = rounding_widened(
+            self.model,
+            solve_reach(self.model, target, None, pessimistic, direct),
+            pessimistic,
+            alg.tolerance,
+        )
         if sol.converged or not small:
             return sol
         free = np.flatnonzero(~sol.fixed)
@@ -144,7 +150,9 @@ class DecoupledProduct:
                 self.model, free, np.maximum(sol.lower, x), sol, pessimistic, alg
             )
             if certified is not None:
-                return certified
+                certified = rounding_widened(self.model, certified, pessimistic, alg.tolerance)
+                if certified.converged:
+                    return certified
         if expanded_size(self.model) > _EXPAND_MAX_ENTRIES:
             return sol
         big, n = expanded_imdp(self.model)

@@ -4,12 +4,15 @@ expanded interval MDP with the same values."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import scipy.sparse as sp
 
 from planner.imdp.decoupled import operator
 from planner.imdp.decoupled.model import DecoupledIMDP
-from planner.imdp.evaluate import chain_reach
+from planner.imdp.evaluate import chain_reach, chain_stay_allowance, shortest_stay_choice
+from planner.imdp.kernels.sweeps import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.solve import Solution, ValueIteration
 
@@ -126,6 +129,38 @@ def solve_reach(
         upper_sweeps=passes,
         _q=lambda: q,
     )
+
+
+def rounding_widened(
+    model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: float
+) -> Solution:
+    """``sol`` with its upper bound widened by what floating point may have hidden from its
+    certificate (the checks accept ``T(U) <= U + 1e-15``; every row evaluation is rounded):
+    the allowance summed over the expected stay of the strategy of shortest stay among the
+    rows within ``U - L`` of the best at ``U``, each with the adversary's distribution at
+    ``U`` (:func:`planner.imdp.evaluate.chain_stay_allowance`, as
+    :func:`planner.imdp.reachability.rounding_widened` for interval MDPs); converged only
+    if the bracket still closes. Unconverged solutions are returned as they are."""
+    if not sol.converged:
+        return sol
+    m = model
+    upper, lower = sol.upper, sol.lower
+    free = ~sol.fixed
+    top, q = _greedy_rows(m, upper, pessimistic, 0.0)
+    best = np.full(m.n_states, -np.inf)
+    best[m.row_state[top]] = q[top]
+    rs = m.row_state
+    slack = (upper - lower)[rs] + ROUNDING
+    near = np.flatnonzero(free[rs] & (q >= best[rs] - slack))
+    if near.size == 0:
+        return sol
+    r, t, p = operator.chosen_distributions(near, upper, pessimistic, m.layout, m.width)
+    mat = sp.csr_matrix((p, (r, t)), shape=(near.size, m.n_states))
+    start = np.searchsorted(near, top[free[m.row_state[top]]])
+    choice = shortest_stay_choice(mat, rs[near], start, rounds=50)
+    allowance = chain_stay_allowance(mat[choice], rs[near[choice]], upper, ROUNDING)
+    widened = np.where(free, np.minimum(1.0, upper + allowance), upper)
+    return replace(sol, upper=widened, converged=bool(np.max(widened - lower) < tol))
 
 
 def certify_candidate(
