@@ -30,7 +30,7 @@ from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
 from planner.imdp.kernels import chain_residual
-from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 
 ORDER_SLACK = 1e-13
@@ -88,9 +88,8 @@ class ChainError:
     adds or loses sits on a successor of value at most the row's largest. Each row's
     expectation is therefore taken to be off by up to ``(k + 4) eps`` times the largest
     value among its successors (:func:`row_rounding`), an error of the right-hand side like
-    the residual. Both
-    scale with the values, so states that circulate for long among states of tiny value
-    keep a tiny bound.
+    the residual. Both scale with the values, so states that circulate for long among
+    states of tiny value keep a tiny bound.
     """
 
     def __init__(
@@ -194,19 +193,17 @@ def _settled_chain(
     adversary_minimizes: bool,
     start: np.ndarray,
     max_rounds: int,
-) -> tuple[np.ndarray, ChainError | None, sp.csr_matrix | None, np.ndarray] | None:
+) -> tuple[np.ndarray, ChainError | None, np.ndarray] | None:
     """The chain of ``rows`` and the adversary's best response, solved: ``(x, error,
-    matrix, defect)`` (``matrix`` one row per strategy row that keeps a chance of the
-    targets, ``defect`` the order slack's error of each), or ``None`` when the adversary
-    did not settle."""
+    defect)`` (``defect`` the order slack's error of each strategy row that keeps a chance
+    of the targets), or ``None`` when the adversary did not settle."""
     rows = np.asarray(rows, dtype=np.int64)
     states = model.row_state[rows]
     fixed_val = np.asarray(fixed_val, dtype=np.float64)
     if not adversary_minimizes:
         adv = OrderingAdversary(model, False, rows=rows)
-        matrix = adv.matrix(start)
-        x, err = chain_reach(matrix, states, fixed_val, error=True)
-        return x, err, matrix, np.zeros(rows.size)
+        x, err = chain_reach(adv.matrix(start), states, fixed_val, error=True)
+        return x, err, np.zeros(rows.size)
     row_mask = np.zeros(model.n_rows, dtype=bool)
     row_mask[rows] = True
     target = fixed_val > 0
@@ -216,7 +213,7 @@ def _settled_chain(
     base = fixed_val.copy()
     base[states] = 0.0
     if not keep.any():
-        return base, None, None, np.zeros(0)
+        return base, None, np.zeros(0)
     rows, states = rows[keep], states[keep]
     adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
     x = np.where(pos, start, base)
@@ -229,7 +226,7 @@ def _settled_chain(
             # the accepted order may miss the exact minimiser by the slack: its defect at
             # x is an error of the right-hand side, like the solve's residual
             exact = OrderingAdversary(model, True, rows=rows).expectation(x)
-            return x, err, matrix, np.maximum(matrix @ x - exact, 0.0)
+            return x, err, np.maximum(matrix @ x - exact, 0.0)
     return None
 
 
@@ -266,7 +263,7 @@ def strategy_reach_value(
     out = _settled_chain(model, rows, fixed_val, adversary_minimizes, start, max_rounds)
     if out is None:
         return None
-    x, err, _, defect = out
+    x, err, defect = out
     if err is None or not sound:
         return x.copy()
     return np.maximum(x - err.bound(defect), 0.0)
@@ -274,21 +271,6 @@ def strategy_reach_value(
 
 _EPS = 4.0 * np.finfo(float).eps
 """Rounding of the residual itself."""
-
-
-def stay_allowance(
-    model: IMDP,
-    rows: np.ndarray,
-    upper: np.ndarray,
-    adversary_minimizes: bool,
-    per_step: float,
-    direct_limit: int = 20_000,
-) -> np.ndarray:
-    """:func:`chain_stay_allowance` for the chain of the strategy ``rows`` (one row per
-    free state, sorted) and the ordering adversary at ``upper``."""
-    rows = np.asarray(rows, dtype=np.int64)
-    matrix = OrderingAdversary(model, adversary_minimizes, rows=rows).matrix(upper)
-    return chain_stay_allowance(matrix, model.row_state[rows], upper, per_step, direct_limit)
 
 
 def chain_stay_allowance(
@@ -344,7 +326,7 @@ def shortest_stay_choice(
     ever. Returns candidate indices, one per state."""
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
-    seg_id = np.cumsum(np.isin(np.arange(rs.size), seg)) - 1
+    seg_id = run_ids(rs)
     states = rs[seg]
     matrix = sp.csr_matrix(matrix)
     pos = np.full(matrix.shape[1], -1, dtype=np.int64)

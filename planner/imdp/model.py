@@ -43,6 +43,13 @@ def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
 
 
+def run_ids(sorted_keys: np.ndarray) -> np.ndarray:
+    """For every element of a sorted array, the index of its run of equal values."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.cumsum(np.concatenate(([0], (sorted_keys[1:] != sorted_keys[:-1]).astype(np.int64))))
+
+
 BOUND_TOLERANCE = 1e-9
 """Slack allowed when checking that a row brackets 1 (``sum l <= 1 <= sum u``)."""
 

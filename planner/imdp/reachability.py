@@ -43,13 +43,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from planner.imdp import certify, strategy
-from planner.imdp.evaluate import shortest_stay_choice, stay_allowance
+from planner.imdp.evaluate import chain_stay_allowance, shortest_stay_choice
 from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.kernels.sweeps import ROUNDING
-from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
 
@@ -317,57 +318,44 @@ def rounding_widened(
     The checks accept ``T(U) <= U + ROUNDING`` and every evaluation is rounded, so along a
     strategy ``sigma`` whose rows satisfy that (with the adversary ``P`` of ``U``), ``U``
     is only known to be at least ``V_sigma - A^-1 e`` (``e`` the allowance per step,
-    :func:`planner.imdp.evaluate.stay_allowance`; 0 where that chain never leaves the
+    :func:`planner.imdp.evaluate.chain_stay_allowance`; 0 where that chain never leaves the
     free states, the strategy's value there being 0). ``V*`` is the value of an optimal
     strategy, so ``U + A^-1 e`` of one bounds it:
 
     * minimising strategy: the strategy greedy for ``U`` is that witness;
     * maximising strategy: an optimal strategy's rows are within ``U - L`` of the best at
       ``U``; among those rows the one of the shortest stay is taken
-      (:func:`shortest_stay`). It stands in for an optimal strategy: exact where the
-      optimal one is unique, and where the optimal strategies all stay long (slow leaks:
-      1e-7 per step, 1e7 steps, up to 1e-8 hidden) it widens the bracket as it must.
+      (:func:`planner.imdp.evaluate.shortest_stay_choice`; the attractor strategy itself
+      beyond ``_SI_MAX_STATES`` free states, where no sparse LU runs). It stands in for an
+      optimal strategy: exact where the optimal one is unique, and where the optimal
+      strategies all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden)
+      it widens the bracket as it must.
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
     st = rs[seg]
-    adv = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
-    q = adv.expectation(upper)
+    # one distribution per free row, the adversary's at ``upper``: every chain below is a
+    # selection of its rows
+    matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=free_rows).matrix(upper))
+    q = matrix @ upper
     if maximize:
         slack = (upper - lower)[rs] + ROUNDING
-        seg_id = np.cumsum(np.isin(np.arange(rs.size), seg)) - 1
-        near = q >= np.maximum.reduceat(q, seg)[seg_id] - slack
+        near = np.flatnonzero(q >= np.maximum.reduceat(q, seg)[run_ids(rs)] - slack)
         cand = free_rows[near]
-        crs = m.row_state[cand]
+        crs = rs[near]
         cseg = first_of_runs(crs)
         # from rows that move towards the settled states (a robust attractor)
         first = strategy.strategy_rows(m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0)
-        rows = shortest_stay(m, cand, first[crs[cseg]], adversary_minimizes, upper)
+        pick = np.searchsorted(cand, first[crs[cseg]])
+        if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
+            pick = shortest_stay_choice(matrix[near], crs, pick)
+        chosen = near[pick]
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
-        rows = np.sort(choice[st])
-    allowance = stay_allowance(m, rows, upper, adversary_minimizes, ROUNDING, _SI_MAX_STATES)
+        chosen = np.searchsorted(free_rows, np.sort(choice[st]))
+    allowance = chain_stay_allowance(matrix[chosen], rs[chosen], upper, ROUNDING, _SI_MAX_STATES)
     out = upper.copy()
     out[st] = np.minimum(1.0, upper[st] + allowance[st])
     return out
-
-
-def shortest_stay(
-    m: IMDP,
-    rows: np.ndarray,
-    start: np.ndarray,
-    adversary_minimizes: bool,
-    upper: np.ndarray,
-) -> np.ndarray:
-    """One of ``rows`` (sorted, at least one per state) per state of short expected stay
-    (:func:`planner.imdp.evaluate.shortest_stay_choice`, each row's distribution the
-    ordering adversary's at ``upper``) from the strategy ``start`` (one of ``rows`` per
-    state, in state order); ``start`` itself on models of more than ``_SI_MAX_STATES``
-    states (no sparse LU)."""
-    rs = m.row_state[rows]
-    if first_of_runs(rs).size > _SI_MAX_STATES:
-        return np.sort(start)
-    matrix = OrderingAdversary(m, adversary_minimizes, rows=rows).matrix(upper)
-    return rows[shortest_stay_choice(matrix, rs, np.searchsorted(rows, start))]

@@ -8,7 +8,7 @@ import numpy as np
 
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
-from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import DiscountedReward, ReachAvoid
 
@@ -48,7 +48,7 @@ def strategy_iteration(
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
-    seg_id = np.cumsum(np.concatenate(([0], (rs[1:] != rs[:-1]).astype(np.int64))))
+    seg_id = run_ids(rs)
     full = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
     q = full.expectation(v)
     choice = strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)

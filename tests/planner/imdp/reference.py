@@ -213,19 +213,23 @@ def ref_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, int]
     return val
 
 
-def ref_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
-    """Worst-case maximal reachability as the best of all memoryless strategies' values
-    (:func:`ref_strategy_value`); no value iteration."""
+def memoryless_strategies(model: IMDP, target: np.ndarray):
+    """Every memoryless strategy (a dict state -> action) on the non-target states."""
     from itertools import product as cartesian
 
     rows = rows_of(model)
     free = [q for q in range(model.n_states) if not target[q]]
     choices = [sorted(a for (s, a) in rows if s == q) for q in free]
-    best = np.where(target, 1.0, 0.0)
     for combo in cartesian(*choices):
-        best = np.maximum(
-            best, ref_strategy_value(model, target, dict(zip(free, combo, strict=True)))
-        )
+        yield dict(zip(free, combo, strict=True))
+
+
+def ref_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
+    """Worst-case maximal reachability as the best of all memoryless strategies' values
+    (:func:`ref_strategy_value`); no value iteration."""
+    best = np.where(target, 1.0, 0.0)
+    for strategy in memoryless_strategies(model, target):
+        best = np.maximum(best, ref_strategy_value(model, target, strategy))
     return best
 
 
@@ -287,13 +291,8 @@ def exact_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, in
 def exact_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
     """Worst-case maximal reachability, the best memoryless strategy's exact value
     (:func:`exact_strategy_value`), rounded to float at the end."""
-    from itertools import product as cartesian
-
-    rows = rows_of(model)
-    free = [q for q in range(model.n_states) if not target[q]]
-    choices = [sorted(a for (s, a) in rows if s == q) for q in free]
     best = None
-    for combo in cartesian(*choices):
-        v = exact_strategy_value(model, target, dict(zip(free, combo, strict=True)))
+    for strategy in memoryless_strategies(model, target):
+        v = exact_strategy_value(model, target, strategy)
         best = v if best is None else [max(a, b) for a, b in zip(best, v, strict=True)]
     return np.array([float(x) for x in best])

@@ -104,7 +104,8 @@ def test_stay_allowance_without_a_factorisation_bounds_the_direct_one():
     # a corridor 0..19: up with 0.5 (19 -> the goal 20), down with 0.4 (0 stays), a sink
     # 21 with 0.1; one action per state, point intervals
     from planner.imdp import IMDP
-    from planner.imdp.evaluate import stay_allowance
+    from planner.imdp.evaluate import chain_stay_allowance
+    from planner.imdp.ordering import OrderingAdversary
 
     n = 22
     s, a, t, p = [20, 21], [0, 0], [20, 21], [1.0, 1.0]
@@ -116,8 +117,9 @@ def test_stay_allowance_without_a_factorisation_bounds_the_direct_one():
     m = IMDP(n, s, a, t, p, p, labels=[()] * 20 + [("g",), ()])
     rows = np.flatnonzero(m.row_state < 20)
     upper = np.concatenate((np.linspace(0.1, 0.9, 20), [1.0, 0.0]))
-    direct = stay_allowance(m, rows, upper, True, 1e-15)
-    jacobi = stay_allowance(m, rows, upper, True, 1e-15, direct_limit=0)
+    chain = OrderingAdversary(m, True, rows=rows).matrix(upper)
+    direct = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15)
+    jacobi = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15, direct_limit=0)
     free = np.arange(20)
     assert np.all(direct[free] > 0) and np.all(np.isfinite(jacobi[free]))
     assert np.all(jacobi[free] >= direct[free]) and np.all(jacobi[free] <= 1.06 * direct[free])
