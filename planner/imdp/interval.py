@@ -25,6 +25,9 @@ repairs, none without ``strategy_iteration``.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from planner.imdp import certify, strategy
@@ -61,6 +64,18 @@ _CANDIDATE_SLACK = 1e-13
 ``tol / 100``)."""
 
 
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """One worker thread for the passes from above, created on first use in each process
+    (a forked child inherits the executor but not its thread)."""
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="hopnav-upper"))
+    return _POOL[1]
+
+
 class _IntervalIteration:
     """The state of one interval iteration: ``v`` (lower), ``u`` (upper) and the counts."""
 
@@ -83,17 +98,27 @@ class _IntervalIteration:
         st = self.sweeper.states
         return float(np.max(self.u[st] - self.v[st]))
 
+    def _from_above(self) -> None:
+        self.sweeper.upper_pass(self.u)
+        self.bounds.deflate(self.u)
+
     def round(self) -> float:
         """One round: sweep and collapse from below, pass and deflate from above; the
-        width after it."""
+        width after it.
+
+        The two sides share no mutable data (``v`` and ``crit`` below, ``u`` and
+        ``crit_up`` above) and their kernels release the GIL, so the pass from above runs
+        on a second thread meanwhile; the result is the same as one after the other."""
         self.it += 1
-        self.residual = self.sweeper.sweep(self.v, self.it % FULL_EVERY == 1)
+        above = _pool().submit(self._from_above)
+        try:
+            self.residual = self.sweeper.sweep(self.v, self.it % FULL_EVERY == 1)
+            self.bounds.collapse(self.v)
+        finally:
+            above.result()
+        self.passes += 1
         if self.alg.callback is not None:
             self.alg.callback(self.it, self.residual)
-        self.bounds.collapse(self.v)
-        self.sweeper.upper_pass(self.u)
-        self.passes += 1
-        self.bounds.deflate(self.u)
         return self.width()
 
     def _held_rows(self, states: np.ndarray) -> np.ndarray:

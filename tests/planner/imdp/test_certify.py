@@ -109,3 +109,51 @@ def test_slow_escape_with_every_state_wide_is_certified():
     assert sol.converged and sol.error < 1e-8
     assert sol.lower[0] <= v0 + 1e-15 and v0 <= sol.upper[0] + 1e-15
     assert sol.lower[1] <= a * v0 + 1e-15 and a * v0 <= sol.upper[1] + 1e-15
+
+
+class _Inline:
+    """An executor that runs each submitted call at once (the rounds one side after the
+    other)."""
+
+    def submit(self, fn):
+        from concurrent.futures import Future
+
+        fut = Future()
+        fut.set_result(fn())
+        return fut
+
+
+def _interval_solution(seed: int):
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, 60, 3, 5)
+    return solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+
+
+def test_passes_from_above_on_a_thread_give_the_sequential_result(monkeypatch):
+    interval = importlib.import_module("planner.imdp.interval")
+    threaded = [_interval_solution(s) for s in range(4)]
+    monkeypatch.setattr(interval, "_pool", lambda: _Inline())
+    inline = [_interval_solution(s) for s in range(4)]
+    for a, b in zip(threaded, inline, strict=True):
+        assert a.upper_sweeps > 10  # interval iteration ran its rounds
+        assert a.iterations == b.iterations and a.upper_sweeps == b.upper_sweeps
+        np.testing.assert_array_equal(a.lower, b.lower)
+        np.testing.assert_array_equal(a.upper, b.upper)
+
+
+def _child_solve(queue) -> None:
+    queue.put(_interval_solution(1).lower.tolist())
+
+
+def test_interval_iteration_runs_in_a_forked_child():
+    # the parent's worker thread does not survive a fork: the child must start its own
+    import multiprocessing
+
+    expected = _interval_solution(1).lower.tolist()  # the parent's pool exists now
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child_solve, args=(queue,))
+    proc.start()
+    got = queue.get(timeout=60)
+    proc.join(timeout=60)
+    assert got == expected
