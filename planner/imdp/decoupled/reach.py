@@ -73,32 +73,25 @@ def solve_reach(
     row_lo, row_hi = m.state_ptr[states], m.state_ptr[states + 1]
     layout = m.layout
 
-    def sweep(x: np.ndarray, lower_side: bool) -> tuple[float, int]:
+    def sweep(x: np.ndarray) -> tuple[float, int]:
         return operator.sweep(
-            states, row_lo, row_hi, x, lower_side, True, pessimistic, layout, m.width, False
+            states, row_lo, row_hi, x, True, True, pessimistic, layout, m.width, False
         )
 
     it, residual, goal, upper, passes = 0, 0.0, alg.tolerance, None, 0
     tries = 0
     while states.size and it < alg.max_iterations:
         it += 1
-        residual, _ = sweep(v, True)
+        residual, _ = sweep(v)
         if alg.callback is not None:
             alg.callback(it, residual)
         if residual >= goal:
             continue
         if not alg.certified:
             break
-        u = v.copy()
-        u[states] = np.minimum(1.0, v[states] + alg.tolerance / 2)
-        last = None
-        for _ in range(8):
-            passes += 1
-            _, bad = sweep(u, False)
-            if bad == 0 or (last is not None and bad >= last):
-                break
-            last = bad
-        if bad == 0:
+        u, k = _checked_candidate(m, states, v, alg.tolerance, pessimistic, 8, False)
+        passes += k
+        if u is not None:
             upper = u
             break
         tries += 1
@@ -175,28 +168,60 @@ def certify_candidate(
     checking passes (:func:`operator.sweep` from above) certify ``U`` superharmonic,
     violating states raised to their Bellman value (rounding of the values from strategy
     iteration) until a pass finds none; else ``None``."""
-    order = states[np.lexsort((states,))]
-    row_lo, row_hi = m.state_ptr[order], m.state_ptr[order + 1]
+    u, _ = _checked_candidate(m, np.sort(states), lower, alg.tolerance, pessimistic, 16, True)
+    if u is None:
+        return None
+    return Solution(
+        values=lower,
+        strategy=sol.strategy,
+        residual=sol.residual,
+        iterations=sol.iterations,
+        converged=bool(np.max(u - lower) < alg.tolerance),
+        evaluations=1,
+        fixed=sol.fixed,
+        lower=lower,
+        upper=u,
+        upper_sweeps=sol.upper_sweeps,
+    )
+
+
+def _checked_candidate(
+    m: DecoupledIMDP,
+    states: np.ndarray,
+    lower: np.ndarray,
+    tol: float,
+    pessimistic: bool,
+    max_passes: int,
+    raise_violations: bool,
+) -> tuple[np.ndarray | None, int]:
+    """The candidate ``U = min(1, lower + tol / 2)`` on ``states`` (in sweep order), checked
+    by at most ``max_passes`` passes of :func:`operator.sweep` from above: ``(U, passes)``
+    once a pass finds no violation (``U`` superharmonic), else ``(None, passes)``.
+    ``raise_violations``: violating states take their Bellman value and the passes go on
+    (a repair); otherwise they stop when the violations no longer decrease."""
+    row_lo, row_hi = m.state_ptr[states], m.state_ptr[states + 1]
     u = lower.copy()
-    u[order] = np.minimum(1.0, lower[order] + alg.tolerance / 2)
-    for _ in range(16):
+    u[states] = np.minimum(1.0, lower[states] + tol / 2)
+    last = None
+    for k in range(1, max_passes + 1):
         _, bad = operator.sweep(
-            order, row_lo, row_hi, u, False, True, pessimistic, m.layout, m.width, True
+            states,
+            row_lo,
+            row_hi,
+            u,
+            False,
+            True,
+            pessimistic,
+            m.layout,
+            m.width,
+            raise_violations,
         )
         if bad == 0:
-            return Solution(
-                values=lower,
-                strategy=sol.strategy,
-                residual=sol.residual,
-                iterations=sol.iterations,
-                converged=bool(np.max(u - lower) < alg.tolerance),
-                evaluations=1,
-                fixed=sol.fixed,
-                lower=lower,
-                upper=u,
-                upper_sweeps=sol.upper_sweeps,
-            )
-    return None
+            return u, k
+        if not raise_violations and last is not None and bad >= last:
+            return None, k
+        last = bad
+    return None, max_passes
 
 
 def expanded_size(model: DecoupledIMDP) -> int:
