@@ -25,11 +25,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
 from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
-from planner.imdp.kernels import chain_residual
+from planner.imdp.kernels import backward_reach, chain_residual
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 
@@ -44,19 +43,13 @@ _DUST = 1e-12
 
 def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     """States with a path (edges ``adj > 0``) to a seed, seeds included."""
-    k = adj.shape[0]
-    rev = (adj > 0).T.tocsr().astype(np.int8)
-    src = np.flatnonzero(seeds)
-    ext = sp.bmat(
-        [
-            [rev, sp.csr_matrix((k, 1), dtype=np.int8)],
-            [sp.csr_matrix((np.ones(src.size, np.int8), (np.zeros_like(src), src)), (1, k)), None],
-        ],
-        format="csr",
+    adj = sp.csr_matrix(adj)
+    return backward_reach(
+        adj.indptr.astype(np.int64),
+        adj.indices.astype(np.int64),
+        adj.data.astype(np.float64),
+        np.asarray(seeds, dtype=bool),
     )
-    out = np.zeros(k + 1, dtype=bool)
-    out[breadth_first_order(ext, k, directed=True, return_predecessors=False)] = True
-    return out[:k]
 
 
 _REFINE = 4
