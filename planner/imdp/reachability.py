@@ -341,7 +341,7 @@ def rounding_widened(
     matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=free_rows).matrix(upper))
     q = matrix @ upper
     if maximize:
-        slack = (upper - lower)[rs] + ROUNDING
+        slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING
         near = np.flatnonzero(q >= np.maximum.reduceat(q, seg)[run_ids(rs)] - slack)
         cand = free_rows[near]
         crs = rs[near]

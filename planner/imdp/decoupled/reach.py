@@ -143,7 +143,7 @@ def rounding_widened(
     best = np.full(m.n_states, -np.inf)
     best[m.row_state[top]] = q[top]
     rs = m.row_state
-    slack = (upper - lower)[rs] + ROUNDING
+    slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING
     near = np.flatnonzero(free[rs] & (q >= best[rs] - slack))
     if near.size == 0:
         return sol
@@ -307,8 +307,10 @@ def strategy_iteration(
     ``fixed_val``) by strategy iteration (Hoffman-Karp): evaluate the strategy against the
     adversary's best response (adversary policy iteration on the exact operator's choices,
     each a sparse solve), switch rows that are strictly better, repeat. ``None`` when it
-    does not settle within ``rounds``. The values are those of the last strategy (a lower
-    bound of the value) and, when it settles, the value itself."""
+    does not settle within ``rounds``. The values, when it settles, are the value itself
+    lowered by the rounding bound of the last evaluation
+    (:class:`planner.imdp.evaluate.ChainError`, with the adversary choice's defect as for
+    :func:`planner.imdp.evaluate.strategy_reach_value`): a lower bound."""
     m = model
     layout = m.layout
     x = np.asarray(start, dtype=np.float64).copy()
@@ -326,7 +328,7 @@ def strategy_iteration(
         for _ in range(rounds):
             r, t, p = operator.chosen_distributions(rows, x, pessimistic, layout, m.width)
             mat = sp.csr_matrix((p, (r, t)), shape=(rows.size, m.n_states))
-            y = chain_reach(mat, m.row_state[rows], np.where(free, 0.0, fixed_val))
+            y, err = chain_reach(mat, m.row_state[rows], np.where(free, 0.0, fixed_val), error=True)
             done = np.max(np.abs(y - x)) <= 1e-15
             x = y
             if done:
@@ -337,7 +339,11 @@ def strategy_iteration(
         best = best[free[m.row_state[best]]]
         better = q[best] > q[rows] + slack
         if not better.any():
-            return x
+            # a lower bound despite rounding: lowered by the solve's bound and, against a
+            # minimising adversary (a fixed choice only bounds its value from above), by
+            # the defect of the choice at x
+            defect = np.maximum(mat @ x - q[rows], 0.0) if pessimistic else None
+            return np.maximum(x - err.bound(defect), 0.0)
         choice = np.where(better, best, rows)
     return None
 
