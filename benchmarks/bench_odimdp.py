@@ -110,9 +110,9 @@ def report(n: int, r: dict) -> None:
     up = gain > 1e-8
     inner = (p.values > 1e-8) & (p.values < 1 - 1e-8)
     print(
-        f"  {n:3d} hops: P_check at the start  product-interval {p.values[k]:.6f} "
-        f"[{p.lower[k]:.6f}, {p.upper[k]:.6f}]  decoupled {d.values[k]:.6f} "
-        f"[{d.lower[k]:.6f}, {d.upper[k]:.6f}]  gain {gain[k]:+.6f}  "
+        f"  {n:3d} hops: P_check at the start  product-interval {p.values[k]:.9g} "
+        f"[{p.lower[k]:.9g}, {p.upper[k]:.9g}]  decoupled {d.values[k]:.9g} "
+        f"[{d.lower[k]:.9g}, {d.upper[k]:.9g}]  gain {gain[k]:+.3g}  "
         f"({r['t_p']:.2f} s / {r['t_d']:.2f} s)"
     )
     print(
@@ -128,7 +128,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="a")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
-    ap.add_argument("--hops", type=int, nargs="+", default=[50, 100, 150])
+    ap.add_argument("--hops", type=int, nargs="+", default=[1, 2, 3, 50, 100, 150])
     args = ap.parse_args()
     sc = load_scenario(args.scenario)
     positions, errors, actions, t_runs = collect(sc, max(args.hops), args.seeds)

@@ -14,8 +14,8 @@ from planner.imdp.decoupled.reach import (
     expanded_imdp,
     expanded_size,
     rounding_widened,
+    settled_values,
     solve_reach,
-    strategy_iteration,
 )
 from planner.imdp.solve import Problem, ReachAvoid, Solution, Specification, ValueIteration, solve
 from planner.modes import Adversary
@@ -124,10 +124,13 @@ class DecoupledProduct:
         (:class:`planner.modes.Adversary`; a plain string is accepted: worst case, ``P_check``,
         by default; the cooperating adversary gives the best case), certified: by sweeps
         with the exact operator; where their bracket does not close (a region the
-        controller can circulate in, with equal values), on :func:`expanded_imdp` by
-        :func:`planner.imdp.solve.solve` (its strategy iteration makes the values exact)
-        when the model has at most ``_EXPAND_MAX_ROWS`` rows (the direct sweeps are then
-        capped at ``_DIRECT_SWEEPS``: they can creep where mass leaks slowly)."""
+        controller can circulate in, with equal values) and the model has at most
+        ``_EXPAND_MAX_ROWS`` rows (the direct sweeps are then capped at ``_DIRECT_SWEEPS``:
+        they can creep where mass leaks slowly), by strategy iteration on the exact operator
+        (its lowered values the lower bound, a checked candidate from its values the upper),
+        else on :func:`expanded_imdp` by :func:`planner.imdp.solve.solve` (at most
+        ``_EXPANDED_SWEEPS`` sweeps) when the expansion has at most ``_EXPAND_MAX_ENTRIES``
+        entries; otherwise the direct bracket, open."""
         pessimistic = Adversary(adversary) == Adversary.PESSIMISTIC
         target = self.accepting_sink()
         alg = ValueIteration() if algorithm is None else algorithm
@@ -144,10 +147,11 @@ class DecoupledProduct:
         if sol.converged or not small:
             return sol
         free = np.flatnonzero(~sol.fixed)
-        x = strategy_iteration(self.model, free, sol.lower, sol.lower, pessimistic)
-        if x is not None:
+        out = settled_values(self.model, free, sol.lower, sol.lower, pessimistic)
+        if out is not None:
+            x, x_low = out
             certified = certify_candidate(
-                self.model, free, np.maximum(sol.lower, x), sol, pessimistic, alg
+                self.model, free, np.maximum(sol.lower, x_low), sol, pessimistic, alg, x
             )
             if certified is not None:
                 certified = rounding_widened(self.model, certified, pessimistic, alg.tolerance)
@@ -160,7 +164,11 @@ class DecoupledProduct:
             ReachAvoid(np.concatenate([target, np.zeros(big.n_states - n, bool)])),
             Adversary(adversary),
         )
-        full = solve(Problem(big, spec), alg)
+        # capped: where interval iteration stalls on an expansion too large for strategy
+        # iteration, the sweeps that follow creep (a 68k-state expansion: 133k sweeps and
+        # 3 minutes for a bracket still [0, 1])
+        capped = replace(alg, max_iterations=min(alg.max_iterations, _EXPANDED_SWEEPS))
+        full = solve(Problem(big, spec), capped)
         return Solution(
             values=np.maximum(sol.lower, full.lower[:n]),
             strategy=np.where(full.strategy[:n] >= 0, full.strategy[:n], sol.strategy),
@@ -181,6 +189,9 @@ _EXPAND_MAX_ROWS = 20_000
 _EXPAND_MAX_ENTRIES = 2_000_000
 """Entries of the expanded model (vertex pairs times their supports) up to which it is
 built; beyond, the direct solve's (sound, possibly wide) bracket is returned."""
+
+_EXPANDED_SWEEPS = 5_000
+"""Sweeps of the solve on the expanded model (interval iteration's rounds included)."""
 
 _DIRECT_SWEEPS = 200
 """Sweeps of the direct solve before the fallback (it can creep where mass leaks slowly)."""

@@ -163,12 +163,16 @@ def certify_candidate(
     sol: Solution,
     pessimistic: bool,
     alg: ValueIteration,
+    near: np.ndarray | None = None,
 ) -> Solution | None:
-    """The bracket ``[lower, U]`` from the candidate ``min(1, lower + tolerance / 2)`` if
-    checking passes (:func:`operator.sweep` from above) certify ``U`` superharmonic,
-    violating states raised to their Bellman value (rounding of the values from strategy
-    iteration) until a pass finds none; else ``None``."""
-    u, _ = _checked_candidate(m, np.sort(states), lower, alg.tolerance, pessimistic, 16, True)
+    """The bracket ``[lower, U]`` from the candidate ``min(1, near + tolerance / 2)``
+    (``near`` defaults to ``lower``; e.g. the unlowered values of strategy iteration, an
+    approximate fixed point, whose candidate has slack where the lowered one has
+    violations of the size of the lowering) if checking passes (:func:`operator.sweep`
+    from above) certify ``U`` superharmonic, violating states raised to their Bellman value
+    until a pass finds none; else ``None``."""
+    base = lower if near is None else np.maximum(lower, near)
+    u, _ = _checked_candidate(m, np.sort(states), base, alg.tolerance, pessimistic, 16, True)
     if u is None:
         return None
     return Solution(
@@ -224,14 +228,20 @@ def _checked_candidate(
     return None, max_passes
 
 
-def expanded_size(model: DecoupledIMDP) -> int:
-    """Entries :func:`expanded_imdp` would have (vertex pairs times the pair supports)."""
+def _vertex_pairs(model: DecoupledIMDP) -> tuple[np.ndarray, np.ndarray]:
+    """Per row: the number of per-axis vertex pairs and the size of the pair support."""
     m = model
     (xp, _, xl, xu), (yp, _, yl, yu) = m.axes
     rows = np.arange(m.n_rows, dtype=np.int64)
     nx = np.diff(operator.vertices(xp, xl, xu, rows, m.tolerance)[0]) // np.diff(xp)
     ny = np.diff(operator.vertices(yp, yl, yu, rows, m.tolerance)[0]) // np.diff(yp)
-    return int(np.sum(nx * ny * (1 + np.diff(xp) * np.diff(yp))))
+    return nx * ny, np.diff(xp) * np.diff(yp)
+
+
+def expanded_size(model: DecoupledIMDP) -> int:
+    """Entries :func:`expanded_imdp` would have (vertex pairs times the pair supports)."""
+    pairs, support = _vertex_pairs(model)
+    return int(np.sum(pairs * (1 + support)))
 
 
 def expanded_imdp(model: DecoupledIMDP) -> tuple[IMDP, int]:
@@ -302,6 +312,7 @@ def strategy_iteration(
     start: np.ndarray,
     pessimistic: bool,
     rounds: int = 50,
+    sound: bool = True,
 ) -> np.ndarray | None:
     """Exact values of the reachability game on ``states`` (the others held at
     ``fixed_val``) by strategy iteration (Hoffman-Karp): evaluate the strategy against the
@@ -310,7 +321,24 @@ def strategy_iteration(
     does not settle within ``rounds``. The values, when it settles, are the value itself
     lowered by the rounding bound of the last evaluation
     (:class:`planner.imdp.evaluate.ChainError`, with the adversary choice's defect as for
-    :func:`planner.imdp.evaluate.strategy_reach_value`): a lower bound."""
+    :func:`planner.imdp.evaluate.strategy_reach_value`): a lower bound. ``sound=False``:
+    the computed values as they are (a candidate for an upper bound that is then checked,
+    an approximate fixed point; not a bound)."""
+    out = settled_values(model, states, fixed_val, start, pessimistic, rounds)
+    if out is None:
+        return None
+    return out[1] if sound else out[0]
+
+
+def settled_values(
+    model: DecoupledIMDP,
+    states: np.ndarray,
+    fixed_val: np.ndarray,
+    start: np.ndarray,
+    pessimistic: bool,
+    rounds: int = 50,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`strategy_iteration`'s values both ways: ``(computed, lowered)``."""
     m = model
     layout = m.layout
     x = np.asarray(start, dtype=np.float64).copy()
@@ -343,7 +371,7 @@ def strategy_iteration(
             # minimising adversary (a fixed choice only bounds its value from above), by
             # the defect of the choice at x
             defect = np.maximum(mat @ x - q[rows], 0.0) if pessimistic else None
-            return np.maximum(x - err.bound(defect), 0.0)
+            return x, np.maximum(x - err.bound(defect), 0.0)
         choice = np.where(better, best, rows)
     return None
 
