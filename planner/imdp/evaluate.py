@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
-from planner.imdp.kernels import backward_reach, chain_residual
+from planner.imdp.kernels import backward_distance, chain_residual, counting_order
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 
@@ -42,14 +42,23 @@ _DUST = 1e-12
 
 
 def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
-    """States with a path (edges ``adj > 0``) to a seed, seeds included."""
+    """States with a path (edges ``adj > 0``) to a seed, seeds included: the breadth-first
+    search of the graph analyses (:func:`planner.imdp.kernels.backward_distance`), each
+    state its own row and the edges listed by target (:func:`counting_order`)."""
     adj = sp.csr_matrix(adj)
-    return backward_reach(
-        adj.indptr.astype(np.int64),
-        adj.indices.astype(np.int64),
-        adj.data.astype(np.float64),
+    n = adj.shape[0]
+    edge = adj.data > 0
+    src = np.repeat(np.arange(n, dtype=np.int64), np.diff(adj.indptr))[edge]
+    order, ptr = counting_order(adj.indices[edge].astype(np.int64), n)
+    dist = backward_distance(
         np.asarray(seeds, dtype=bool),
+        np.ones(n, bool),
+        np.arange(n),
+        ptr,
+        src[order],
+        np.ones(order.size),
     )
+    return np.isfinite(dist)
 
 
 _REFINE = 4

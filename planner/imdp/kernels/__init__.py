@@ -8,7 +8,6 @@ from planner.imdp.kernels.exact import chain_residual
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     backward_distance,
-    backward_reach,
     counting_order,
     incoming_index,
     prune_kernel,
@@ -21,7 +20,6 @@ __all__ = [
     "ReachSweeper",
     "all_row_values",
     "backward_distance",
-    "backward_reach",
     "chain_residual",
     "component_exit_bound",
     "counting_order",

@@ -1,6 +1,6 @@
 """Graph searches over the rows of an interval MDP, compiled: the robust attractor, the
-rows that stay in a set, breadth-first distances, the pruning cascade of removed states, a
-counting sort, and backward reachability in a chain's matrix."""
+rows that stay in a set, breadth-first distances, the pruning cascade of removed states, and
+a counting sort."""
 
 from __future__ import annotations
 
@@ -215,43 +215,3 @@ def incoming_index(successor, entry_row, lower, upper, n_states):
         lo[k] = lower[e]
         up[k] = upper[e]
     return ptr, rows, lo, up
-
-
-@numba.njit(cache=True, nogil=True)
-def backward_reach(indptr, indices, data, seeds):
-    """States of a square CSR matrix with a path along entries ``> 0`` to a seed, seeds
-    included: the reverse adjacency by one counting pass, then a breadth-first search."""
-    n = seeds.size
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            if data[k] > 0.0:
-                ptr[indices[k] + 1] += 1
-    for i in range(n):
-        ptr[i + 1] += ptr[i]
-    fill = ptr[:-1].copy()
-    pred = np.empty(ptr[n], dtype=np.int64)
-    for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            if data[k] > 0.0:
-                j = indices[k]
-                pred[fill[j]] = i
-                fill[j] += 1
-    out = seeds.copy()
-    queue = np.empty(n, dtype=np.int64)
-    tail = 0
-    for i in range(n):
-        if out[i]:
-            queue[tail] = i
-            tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for k in range(ptr[t], ptr[t + 1]):
-            i = pred[k]
-            if not out[i]:
-                out[i] = True
-                queue[tail] = i
-                tail += 1
-    return out
