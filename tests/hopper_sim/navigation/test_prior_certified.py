@@ -48,7 +48,8 @@ def test_prior_abstraction_is_certified(name):
 def test_few_hops_of_data_keep_both_brackets_ordered():
     # a handful of hops leaves wide, uneven boxes: the decoupled solve may go through
     # strategy iteration, whose values must be lowered by their rounding bound (unlowered,
-    # they sat 4e-13 above the value and the certified pass from above crossed them)
+    # no proven bound, they sat up to 4e-13 above the checked candidate and the rounding
+    # widening crashed)
     sc = load_scenario("a")
     runner = NavigationRunner(sc)
     grid, settings = runner.grid, runner.synthesis_settings
