@@ -28,7 +28,12 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
-from planner.imdp.kernels import backward_distance, chain_residual, counting_order
+from planner.imdp.kernels import (
+    backward_distance,
+    chain_residual,
+    counting_order,
+    surest_exit_choice,
+)
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 
@@ -334,28 +339,86 @@ def chain_stay_allowance(
     return out
 
 
-def shortest_stay_choice(
-    matrix: sp.csr_matrix, row_states: np.ndarray, start: np.ndarray, rounds: int = 8
-) -> np.ndarray:
-    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
-    over all states; ``row_states`` their states, sorted, at least one per state), chosen
-    to keep the expected stay among these states short: policy iteration for the minimal
-    expected number of steps from ``start`` (a candidate index per state, in state order),
-    ``rounds`` evaluations at most; a state whose chain never leaves counts as staying for
-    ever. Returns candidate indices, one per state."""
+def _inner_rows(matrix: sp.csr_matrix, row_states: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The candidate rows restricted to their own states (mass elsewhere leaves), columns
+    renumbered in state order, and those states."""
     rs = np.asarray(row_states, dtype=np.int64)
-    seg = first_of_runs(rs)
-    seg_id = run_ids(rs)
-    states = rs[seg]
+    states = rs[first_of_runs(rs)]
     matrix = sp.csr_matrix(matrix)
     pos = np.full(matrix.shape[1], -1, dtype=np.int64)
     pos[states] = np.arange(states.size)
     cols = np.flatnonzero(pos >= 0)
-    # rows restricted to the states themselves (mass elsewhere leaves)
     inner = matrix[:, cols].tocsr()
     inner = sp.csr_matrix(
         (inner.data, pos[cols][inner.indices], inner.indptr), shape=(rs.size, states.size)
     )
+    return inner, states
+
+
+def surest_exit_start(
+    matrix: sp.csr_matrix, row_states: np.ndarray, fallback: np.ndarray | None = None
+) -> np.ndarray:
+    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
+    over all states; ``row_states`` their states, sorted, at least one per state) whose
+    chain leaves these states from every state that can leave them: the greedy choice of
+    :func:`planner.imdp.kernels.surest_exit_choice` (rows with the largest one-step mass
+    towards the exit), a good start for :func:`shortest_stay_choice`; ``fallback`` (a
+    candidate index per state) where no path leaves, -1 there without one. Returns
+    candidate indices."""
+    inner, states = _inner_rows(matrix, row_states)
+    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
+    leak[leak <= _DUST] = 0.0
+    local = run_ids(np.asarray(row_states, dtype=np.int64))
+    coo = inner.tocoo()
+    order, ptr = counting_order(coo.col.astype(np.int64), states.size)
+    choice = surest_exit_choice(
+        local, leak, states.size, ptr, coo.row[order].astype(np.int64), coo.data[order]
+    )
+    if fallback is None:
+        return choice
+    return np.where(choice >= 0, choice, np.asarray(fallback, dtype=np.int64))
+
+
+def widening_room(lower: np.ndarray, upper: np.ndarray, tolerance: float) -> float:
+    """How much the rounding widening may add to a bracket: what is left to ``tolerance``
+    of the widest, or a tenth of that width when it already exceeds the tolerance (an open
+    bracket need not be widened minimally). Only bounds the effort spent on a short-stay
+    witness; the widening itself is always the witness's full allowance."""
+    width = float(np.max(upper - lower)) if upper.size else 0.0
+    return max(tolerance - width, 0.1 * width, 0.0)
+
+
+def stay_limit(matrix: sp.csr_matrix, upper: np.ndarray, per_step: float, room: float) -> float:
+    """The expected stay up to which :func:`chain_stay_allowance` of any selection of the
+    rows of ``matrix`` (evaluated at ``upper``, ``per_step`` allowance per step) stays
+    within ``room``: ``room / ((1 + margin) max a)``, ``a`` the per-step allowance of each
+    row; 0 without room."""
+    if room <= 0.0 or matrix.shape[0] == 0:
+        return 0.0
+    top = per_step + float(np.max(row_rounding(matrix.indptr, matrix.indices, upper, 3.0)))
+    return room / ((1.0 + _SOLVE_MARGIN) * top)
+
+
+def shortest_stay_choice(
+    matrix: sp.csr_matrix,
+    row_states: np.ndarray,
+    start: np.ndarray,
+    rounds: int = 50,
+    limit: float = 0.0,
+) -> np.ndarray:
+    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
+    over all states; ``row_states`` their states, sorted, at least one per state), chosen
+    to keep the expected stay among these states short: policy iteration for the minimal
+    expected number of steps from ``start`` (a candidate index per state, in state order;
+    :func:`surest_exit_start` gives a good one), ``rounds`` evaluations at most, until no
+    state improves or every stay of a leaving state is at most ``limit`` (short enough:
+    :func:`stay_limit`); a state whose chain never leaves counts as staying for ever.
+    Returns candidate indices, one per state (each improvement only shortens the
+    stays)."""
+    rs = np.asarray(row_states, dtype=np.int64)
+    seg = first_of_runs(rs)
+    seg_id = run_ids(rs)
+    inner, states = _inner_rows(matrix, rs)
     choice = np.asarray(start, dtype=np.int64)
     for _ in range(rounds):
         sub = inner[choice]
@@ -365,6 +428,8 @@ def shortest_stay_choice(
         idx = np.flatnonzero(live)
         if idx.size:
             w[idx] = chain_lu(sub[idx][:, idx]).solve(np.ones(idx.size))
+            if np.max(w[idx]) <= limit:
+                break
         cost = 1.0 + inner @ w
         best = np.minimum.reduceat(cost, seg)
         better = best < cost[choice] * (1.0 - 1e-9)

@@ -46,7 +46,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner.imdp import certify, strategy
-from planner.imdp.evaluate import chain_stay_allowance, shortest_stay_choice
+from planner.imdp.evaluate import (
+    chain_stay_allowance,
+    shortest_stay_choice,
+    stay_limit,
+    surest_exit_start,
+    widening_room,
+)
 from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.kernels.sweeps import ROUNDING
@@ -300,7 +306,7 @@ def reach_values(
     result = run.result()
     if alg.certified:
         result.upper = rounding_widened(
-            m, free_rows, result.lower, result.upper, adversary_minimizes, maximize
+            m, free_rows, result.lower, result.upper, adversary_minimizes, maximize, alg.tolerance
         )
     return result
 
@@ -312,6 +318,7 @@ def rounding_widened(
     upper: np.ndarray,
     adversary_minimizes: bool,
     maximize: bool,
+    tolerance: float = 0.0,
 ) -> np.ndarray:
     """``upper`` plus what floating point may have hidden from its certificate.
 
@@ -324,9 +331,13 @@ def rounding_widened(
 
     * minimising strategy: the strategy greedy for ``U`` is that witness;
     * maximising strategy: an optimal strategy's rows are within ``U - L`` of the best at
-      ``U``; among those rows the one of the shortest stay is taken
-      (:func:`planner.imdp.evaluate.shortest_stay_choice`; the attractor strategy itself
-      beyond ``_SI_MAX_STATES`` free states, where no sparse LU runs). It stands in for an
+      ``U``; among those rows one of short stay is taken: the greedy surest exit
+      (:func:`planner.imdp.evaluate.surest_exit_start`), shortened by policy iteration
+      (:func:`planner.imdp.evaluate.shortest_stay_choice`) up to ``_SI_MAX_STATES`` free
+      states, beyond which no sparse LU runs, until the widening fits in the room left to
+      ``tolerance`` (or a tenth of an open bracket;
+      :func:`planner.imdp.evaluate.widening_room`). It stands in
+      for an
       optimal strategy: exact where the optimal one is unique, and where the optimal
       strategies all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden)
       it widens the bracket as it must.
@@ -346,11 +357,18 @@ def rounding_widened(
         cand = free_rows[near]
         crs = rs[near]
         cseg = first_of_runs(crs)
-        # from rows that move towards the settled states (a robust attractor)
-        first = strategy.strategy_rows(m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0)
-        pick = np.searchsorted(cand, first[crs[cseg]])
+        pick = surest_exit_start(matrix[near], crs)
+        if (pick < 0).any():
+            # where no chain of the near rows leaves, rows that move towards the settled
+            # states (a robust attractor; states at 0 count as settled)
+            first = strategy.strategy_rows(
+                m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0
+            )
+            pick = np.where(pick >= 0, pick, np.searchsorted(cand, first[crs[cseg]]))
         if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
-            pick = shortest_stay_choice(matrix[near], crs, pick)
+            room = widening_room(lower[st], upper[st], tolerance)
+            limit = stay_limit(matrix[near], upper, ROUNDING, room)
+            pick = shortest_stay_choice(matrix[near], crs, pick, limit=limit)
         chosen = near[pick]
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)

@@ -11,7 +11,14 @@ import scipy.sparse as sp
 
 from planner.imdp.decoupled import operator
 from planner.imdp.decoupled.model import DecoupledIMDP
-from planner.imdp.evaluate import chain_reach, chain_stay_allowance, shortest_stay_choice
+from planner.imdp.evaluate import (
+    chain_reach,
+    chain_stay_allowance,
+    shortest_stay_choice,
+    stay_limit,
+    surest_exit_start,
+    widening_room,
+)
 from planner.imdp.kernels.sweeps import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.solve import Solution, ValueIteration
@@ -150,7 +157,9 @@ def rounding_widened(
     r, t, p = operator.chosen_distributions(near, upper, pessimistic, m.layout, m.width)
     mat = sp.csr_matrix((p, (r, t)), shape=(near.size, m.n_states))
     start = np.searchsorted(near, top[free[m.row_state[top]]])
-    choice = shortest_stay_choice(mat, rs[near], start, rounds=50)
+    start = surest_exit_start(mat, rs[near], start)
+    limit = stay_limit(mat, upper, ROUNDING, widening_room(lower[free], upper[free], tol))
+    choice = shortest_stay_choice(mat, rs[near], start, limit=limit)
     allowance = chain_stay_allowance(mat[choice], rs[near[choice]], upper, ROUNDING)
     widened = np.where(free, np.minimum(1.0, upper + allowance), upper)
     return replace(sol, upper=widened, converged=bool(np.max(widened - lower) < tol))

@@ -13,6 +13,7 @@ from planner.imdp.kernels.search import (
     prune_kernel,
     robust_attractor,
     rows_staying_in,
+    surest_exit_choice,
 )
 from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep, upper_sweep
 
@@ -30,5 +31,6 @@ __all__ = [
     "prune_kernel",
     "robust_attractor",
     "rows_staying_in",
+    "surest_exit_choice",
     "upper_sweep",
 ]

@@ -215,3 +215,90 @@ def incoming_index(successor, entry_row, lower, upper, n_states):
         lo[k] = lower[e]
         up[k] = upper[e]
     return ptr, rows, lo, up
+
+
+@numba.njit(cache=True, nogil=True)
+def _heap_push(key, item, size, k, x):
+    """Push ``(k, x)`` onto the max-heap ``key``/``item`` of ``size`` entries; the new size."""
+    i = size
+    key[i] = k
+    item[i] = x
+    while i > 0 and key[(i - 1) // 2] < key[i]:
+        p = (i - 1) // 2
+        key[i], key[p] = key[p], key[i]
+        item[i], item[p] = item[p], item[i]
+        i = p
+    return size + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _heap_pop(key, item, size):
+    """Remove the top of the max-heap; ``(key, item, new size)``."""
+    k, x = key[0], item[0]
+    size -= 1
+    key[0], item[0] = key[size], item[size]
+    i = 0
+    while True:
+        a = 2 * i + 1
+        if a >= size:
+            break
+        if a + 1 < size and key[a + 1] > key[a]:
+            a += 1
+        if key[a] <= key[i]:
+            break
+        key[i], key[a] = key[a], key[i]
+        item[i], item[a] = item[a], item[i]
+        i = a
+    return k, x, size
+
+
+@numba.njit(cache=True, nogil=True)
+def surest_exit_choice(row_state, leak, n_states, inc_ptr, inc_row, inc_p):
+    """One row per state, chosen so that the chain of the choice leaves the states from
+    every state that can leave them, each row with a large one-step mass into the states
+    placed before it.
+
+    Rows ``r`` (of state ``row_state[r]``) are substochastic distributions over
+    ``n_states`` states, ``leak[r]`` the mass leaving them; ``inc_ptr``/``inc_row``/
+    ``inc_p`` list the entries by column. States are placed greedily, as in Dijkstra's
+    search: next the state whose best row puts the most mass into the placed states plus
+    its leak, with that row. Every chosen row has positive mass out or into states placed
+    before it, so its chain leaves from every placed state; a state without a path out
+    gets ``-1``. Returns the chosen row of every state."""
+    n_rows = row_state.size
+    acc = leak.copy()
+    best = np.zeros(n_states)
+    choice = np.full(n_states, -1, dtype=np.int64)
+    placed = np.zeros(n_states, dtype=np.bool_)
+    key = np.empty(n_rows + inc_row.size)
+    item = np.empty(n_rows + inc_row.size, dtype=np.int64)
+    size = 0
+    for r in range(n_rows):
+        s = row_state[r]
+        if acc[r] > best[s]:
+            best[s] = acc[r]
+            choice[s] = r
+    for s in range(n_states):
+        if choice[s] >= 0:
+            size = _heap_push(key, item, size, best[s], choice[s])
+    while size > 0:
+        k, r, size = _heap_pop(key, item, size)
+        t = row_state[r]
+        if placed[t] or k < best[t]:
+            continue
+        placed[t] = True
+        choice[t] = r
+        for e in range(inc_ptr[t], inc_ptr[t + 1]):
+            q = inc_row[e]
+            s = row_state[q]
+            if placed[s]:
+                continue
+            acc[q] += inc_p[e]
+            if acc[q] > best[s]:
+                best[s] = acc[q]
+                choice[s] = q
+                size = _heap_push(key, item, size, acc[q], q)
+    for s in range(n_states):
+        if not placed[s]:
+            choice[s] = -1
+    return choice
