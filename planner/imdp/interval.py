@@ -96,6 +96,8 @@ class _IntervalIteration:
         self.u = v.copy()
         self.u[st] = 1.0
         self.bounds.deflate(self.u)
+        # ``u`` only ever decreases below (passes, deflation, repairs keep a minimum)
+        self.cache = sweeper.upper_cache()
         self.residual = np.inf
         self.it = self.passes = self.evaluations = self.repairs = self.stalls = 0
         self.global_repair = False
@@ -106,7 +108,7 @@ class _IntervalIteration:
         return float(np.max(self.u[st] - self.v[st]))
 
     def _from_above(self) -> None:
-        self.sweeper.upper_pass(self.u)
+        self.sweeper.upper_pass(self.u, cache=self.cache)
         self.bounds.deflate(self.u)
 
     def round(self) -> float:

@@ -106,6 +106,8 @@ def upper_sweep(
     maximize,
     adversary_minimizes,
     raise_violations,
+    cache,
+    lazy,
 ):
     """One Gauss-Seidel pass of ``U(s) <- T(U)(s)`` from above, in place, that only ever
     lowers ``U``: a state whose Bellman value exceeds ``U(s)`` keeps ``U(s)`` and counts as
@@ -119,31 +121,76 @@ def upper_sweep(
     each state's value was computed from values at least the final ones (they only
     decrease) and ``T`` is monotone. For reachability every superharmonic ``U`` (with the
     targets at 1) is at least the least fixed point, i.e. an upper bound of the values.
+
+    ``lazy`` (maximising strategy only): ``cache[r]`` holds, per layout row, a value the
+    row had at an earlier ``U`` (``inf`` before its first evaluation). Between passes
+    ``U`` must only decrease; the row values, monotone in ``U``, then only decrease too, so
+    a cached value bounds the row's current one from above, and a state's rows are
+    evaluated highest cache first until a freshly evaluated value is at least every
+    cached one left: the same maximum as evaluating every row (up to the row rounding
+    the checks already allow), mostly at the cost of one row.
     """
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     decrease = 0.0
     violations = 0
+    lazy = lazy and maximize
+    width = 1
+    if lazy:
+        for k in range(states.size):
+            width = max(width, state_rows[k + 1] - state_rows[k])
+    fresh = np.zeros(width, dtype=np.bool_)
     for k in range(states.size):
         s = states[k]
+        lo = state_rows[k]
+        hi = state_rows[k + 1]
         best = -np.inf if maximize else np.inf
-        for r in range(state_rows[k], state_rows[k + 1]):
-            q = row_value(
-                row_ptr[r],
-                row_ptr[r + 1],
-                remaining[r],
-                succ,
-                lower,
-                gap,
-                u,
-                sign,
-                crit,
-                r,
-                idx,
-                keys,
-            )
-            if (q > best) if maximize else (q < best):
-                best = q
+        if lazy:
+            fresh[: hi - lo] = False
+            while True:
+                top = lo
+                for r in range(lo + 1, hi):
+                    # ties go to a fresh row: the maximum is then known
+                    if cache[r] > cache[top] or (
+                        cache[r] == cache[top] and fresh[r - lo] and not fresh[top - lo]
+                    ):
+                        top = r
+                if fresh[top - lo]:
+                    best = cache[top]
+                    break
+                cache[top] = row_value(
+                    row_ptr[top],
+                    row_ptr[top + 1],
+                    remaining[top],
+                    succ,
+                    lower,
+                    gap,
+                    u,
+                    sign,
+                    crit,
+                    top,
+                    idx,
+                    keys,
+                )
+                fresh[top - lo] = True
+        else:
+            for r in range(lo, hi):
+                q = row_value(
+                    row_ptr[r],
+                    row_ptr[r + 1],
+                    remaining[r],
+                    succ,
+                    lower,
+                    gap,
+                    u,
+                    sign,
+                    crit,
+                    r,
+                    idx,
+                    keys,
+                )
+                if (q > best) if maximize else (q < best):
+                    best = q
         old = u[s]
         if best <= old:
             u[s] = best
@@ -207,6 +254,7 @@ class ReachSweeper:
         self._one_row = np.arange(self.states.size + 1, dtype=np.int64)
         self._light: tuple[np.ndarray, ...] | None = None
         self._light_rows = self.best_row
+        self._no_cache = np.empty(0)
 
     def sweep(self, v: np.ndarray, full: bool = True) -> float:
         """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`): all
@@ -258,9 +306,18 @@ class ReachSweeper:
             )
         )
 
-    def upper_pass(self, u: np.ndarray, raise_violations: bool = False) -> tuple[float, int]:
-        """One pass of :func:`upper_sweep` on ``u`` in place (all rows):
-        ``(max decrease, violations)``."""
+    def upper_cache(self) -> np.ndarray:
+        """A fresh row cache for lazy passes of :meth:`upper_pass` (every row unknown)."""
+        return np.full(self.rows.size, np.inf)
+
+    def upper_pass(
+        self, u: np.ndarray, raise_violations: bool = False, cache: np.ndarray | None = None
+    ) -> tuple[float, int]:
+        """One pass of :func:`upper_sweep` on ``u`` in place: ``(max decrease,
+        violations)``. With a ``cache`` (:meth:`upper_cache`; maximising strategies) the
+        pass is lazy: ``u`` must not have increased anywhere since the last pass with that
+        cache."""
+        lazy = cache is not None
         dec, bad = upper_sweep(
             self.states,
             self.state_rows,
@@ -274,6 +331,8 @@ class ReachSweeper:
             self.maximize,
             self.adversary_minimizes,
             raise_violations,
+            cache if lazy else self._no_cache,
+            lazy,
         )
         return float(dec), int(bad)
 

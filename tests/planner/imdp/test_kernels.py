@@ -36,6 +36,29 @@ def test_row_values_match_reference_while_values_change(minimize, zero_lower):
             assert got[r] == pytest.approx(ref_expectation(row, v, minimize), abs=1e-12)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_lazy_upper_pass_equals_the_full_pass_while_values_decrease(seed):
+    # the same passes, from the same decreasing vectors, with and without the row cache
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=60, n_actions=5, max_succ=6)
+    eager, lazy = _sweeper(m, True), _sweeper(m, True)
+    cache = lazy.upper_cache()
+    u = np.ones(m.n_states)
+    evaluated = []
+    for _ in range(12):
+        a, b = u.copy(), u.copy()
+        before = cache.copy()
+        dec_a, bad_a = eager.upper_pass(a)
+        dec_b, bad_b = lazy.upper_pass(b, cache=cache)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-15)
+        assert bad_a == bad_b and dec_b == pytest.approx(dec_a, abs=1e-15)
+        evaluated.append(int((cache != before).sum()))
+        # any decrease, not only the pass's own: values must merely never rise
+        u = np.minimum(a, a * rng.uniform(0.7, 1.0, m.n_states))
+    assert evaluated[0] == m.n_rows  # the first pass evaluates every row
+    assert min(evaluated[1:]) < m.n_rows  # later passes skip rows
+
+
 def test_row_value_edge_rows():
     # row 0: lower bounds sum to 1 (nothing left to hand out); row 1: a point interval
     # row 2: upper bounds sum to exactly 1 (all successors at their upper bound)
