@@ -24,6 +24,7 @@ def compile_kernels() -> float:
     intervals), as at the start of every run.
     """
     from planner.gp.landing import LandingErrorGP
+    from planner.imdp import IMDP, OrderingAdversary
     from planner.imdp.grid import ACTIONS, GridWorld
     from planner.learning import resynthesise
     from planner.ltl.translate import translate
@@ -48,4 +49,11 @@ def compile_kernels() -> float:
         state_cell=np.arange(n_product) // automaton.n_states,
     )
     resynthesise(LandingErrorGP(), grid, automaton, none, none, learner=learner, initial_cell=0)
+    # a stored adversary re-sorting its rows (the toy synthesis never needs to)
+    model = IMDP(
+        3, [0, 0, 0, 1, 2], [0] * 5, [0, 1, 2, 1, 2], [0.1] * 3 + [1.0] * 2, [0.9] * 3 + [1.0] * 2
+    )
+    adversary = OrderingAdversary(model)
+    adversary.expectation(np.array([0.0, 0.5, 1.0]))
+    adversary.expectation(np.array([1.0, 0.5, 0.0]))
     return time.perf_counter() - t0

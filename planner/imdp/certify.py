@@ -27,8 +27,7 @@ from scipy.sparse.csgraph import connected_components
 
 from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
-from planner.imdp.model import IMDP
-from planner.imdp.ordering import row_entries
+from planner.imdp.model import IMDP, row_entries
 from planner.modes import Adversary
 
 OVI_PASSES = 8

@@ -483,3 +483,12 @@ def _raise_entry_error(code, i, s, a, t, lo, up, n, n_act) -> None:
     if code == 4:
         raise IntervalBoundsError(f"{where}: bounds [{lo[i]}, {up[i]}] are not inside [0, 1]")
     raise IntervalBoundsError(f"{where}: lower bound {lo[i]} exceeds upper bound {up[i]}")
+
+
+def row_entries(model: IMDP, rows: np.ndarray) -> np.ndarray:
+    """Entry indices of the given rows, row after row."""
+    starts = model.row_ptr[rows]
+    lens = model.row_ptr[rows + 1] - starts
+    total = int(lens.sum())
+    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
+    return np.arange(total, dtype=np.int64) + offs

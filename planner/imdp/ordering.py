@@ -10,7 +10,10 @@ successors by ``v`` ascending, gives each successor ``l_j`` and then hands the r
 The maximising adversary does the same with ``v`` sorted descending. The chosen
 distribution only depends on the *order* of the successors, so :class:`OrderingAdversary`
 keeps the sorted layout and the resulting sparse distribution matrix between calls and
-re-sorts only the rows whose order the new values break (ties never force a re-sort).
+re-sorts only the rows whose order the new values break (ties never force a re-sort). The
+rows are sorted and their mass handed out by a compiled kernel
+(:func:`planner.imdp.kernels.rows.order_rows`: insertion sort from the current order,
+one pass where the order still stands).
 """
 
 from __future__ import annotations
@@ -18,56 +21,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from planner.imdp.model import IMDP, first_of_runs
-
-
-def segmented_cumsum(x: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
-    """Inclusive prefix sums of ``x`` restarted at every segment start.
-
-    ``pos[i]`` is the position of element ``i`` inside its (contiguous) segment. A
-    Hillis-Steele scan: ``ceil(log2(max_len))`` vectorised passes, each sum only over
-    elements of one segment (no cancellation across segments).
-    """
-    out = x.astype(np.float64, copy=True)
-    d = 1
-    while d < max_len:
-        shifted = np.zeros_like(out)
-        shifted[d:] = out[:-d]
-        out += np.where(pos >= d, shifted, 0.0)
-        d *= 2
-    return out
-
-
-def row_entries(model: IMDP, rows: np.ndarray) -> np.ndarray:
-    """Entry indices of the given rows, row after row."""
-    starts = model.row_ptr[rows]
-    lens = model.row_ptr[rows + 1] - starts
-    total = int(lens.sum())
-    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
-    return np.arange(total, dtype=np.int64) + offs
-
-
-def _ranks(keys: np.ndarray) -> np.ndarray:
-    rank = np.empty(keys.size, dtype=np.int64)
-    rank[np.argsort(keys, kind="stable")] = np.arange(keys.size)
-    return rank
-
-
-def _sort_rows(keys: np.ndarray, lens: np.ndarray, pos: np.ndarray, max_len: int) -> np.ndarray:
-    """Permutation that sorts ``keys`` within each of the consecutive rows of ``lens``
-    entries (stable), through a padded ``(rows, max_len)`` array sorted along its rows."""
-    n_rows = lens.size
-    row = np.repeat(np.arange(n_rows, dtype=np.int64), lens)
-    if n_rows * max_len > 4 * keys.size + 1024:
-        # long rows among short ones: padding would waste memory, sort (row, rank) keys
-        return np.argsort(row * max(keys.size, 1) + _ranks(keys), kind="stable")
-    padded = np.full((n_rows, max_len), np.inf)
-    padded[row, pos] = keys
-    order = np.argsort(padded, axis=1, kind="stable")
-    starts = np.concatenate(([0], np.cumsum(lens)[:-1]))
-    # +inf padding sorts last; keys equal to +inf keep their place before the padding
-    valid = np.arange(max_len)[None, :] < lens[:, None]
-    return (starts[:, None] + order)[valid]
+from planner.imdp.kernels.rows import order_rows, unordered_rows
+from planner.imdp.model import IMDP, row_entries
 
 
 class OrderingAdversary:
@@ -97,86 +52,69 @@ class OrderingAdversary:
         m = model
         if rows is None:
             self.rows = np.arange(m.n_rows, dtype=np.int64)
-            entries = np.arange(m.n_entries, dtype=np.int64)
-            self._row_ptr = m.row_ptr
-            self._entry_row = m.entry_row
+            self._row_ptr = np.array(m.row_ptr, dtype=np.int64)  # writable, as below
         else:
             self.rows = np.asarray(rows, dtype=np.int64)
-            entries = row_entries(m, self.rows)
             lens = m.row_ptr[self.rows + 1] - m.row_ptr[self.rows]
             self._row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
-            self._entry_row = np.repeat(np.arange(self.rows.size, dtype=np.int64), lens)
         self.n_rows = int(self.rows.size)
-        self._successor = m.successor[entries]
-        self._lower = m.lower[entries]
-        self._gap = m.upper[entries] - self._lower
-        self._pos = np.arange(entries.size, dtype=np.int64) - self._row_ptr[self._entry_row]
-        lens = np.diff(self._row_ptr)
-        self._lens = lens
-        self._max_len = int(lens.max()) if lens.size else 0
         self._remaining = 1.0 - m.row_lower_sum[self.rows]
         self._perm: np.ndarray | None = None
-        self._succ = np.empty(entries.size, dtype=np.int64)
-        self._prob = np.empty(entries.size, dtype=np.float64)
+        """The model's entry indices of every row, in the adversary's order."""
+        self._succ: np.ndarray | None = None
+        self._prob: np.ndarray | None = None
         self._matrix: sp.csr_matrix | None = None
         self.n_sorts = 0
         """How many times rows were (re-)sorted (a full sort counts once)."""
 
     def _keys(self, values: np.ndarray) -> np.ndarray:
-        return values if self.minimize else -values
+        # a fresh writable array either way: one kernel signature for every caller
+        return values.copy() if self.minimize else -values
 
-    def _assign(self, idx: np.ndarray | slice) -> None:
-        """Recompute the distribution of the (whole) rows whose sorted entries are ``idx``."""
-        perm = self._perm[idx]
-        lo = self._lower[perm]
-        gap = self._gap[perm]
-        pos = self._pos[idx]
-        before = segmented_cumsum(gap, pos, self._max_len) - gap
-        er = self._entry_row[idx]
-        rem = self._remaining[er]
-        self._prob[idx] = lo + np.clip(rem - before, 0.0, gap)
-        self._succ[idx] = self._successor[perm]
-
-    def _sort_all(self, keys: np.ndarray) -> None:
+    def _order(self, keys: np.ndarray, todo: np.ndarray) -> None:
         m = self.model
-        self._perm = _sort_rows(
-            keys[self._successor], np.diff(self._row_ptr), self._pos, self._max_len
+        order_rows(
+            todo,
+            self._row_ptr,
+            m.successor,
+            m.lower,
+            m.upper,
+            self._remaining,
+            keys,
+            self._perm,
+            self._prob,
+            self._succ,
         )
-        self._assign(slice(None))
-        self._matrix = sp.csr_matrix(
-            (self._prob, self._succ, self._row_ptr),
-            shape=(self.n_rows, m.n_states),
-            copy=False,
-        )
-        # scipy may convert the index arrays: keep writing into the matrix's own arrays
-        self._prob = self._matrix.data
-        self._succ = self._matrix.indices
         self.n_sorts += 1
 
     def update(self, values: np.ndarray) -> None:
         """Make the stored distributions optimal for ``values`` (shape ``(n_states,)``)."""
         keys = self._keys(np.asarray(values, dtype=np.float64))
-        if self._perm is None:
-            self._sort_all(keys)
+        if self._matrix is None:
+            m = self.model
+            n_entries = int(self._row_ptr[-1])
+            self._perm = (
+                np.arange(n_entries, dtype=np.int64)
+                if self.rows.size == m.n_rows
+                else row_entries(m, self.rows)
+            )
+            self._prob = np.empty(n_entries)
+            # the index dtype scipy keeps for any matrix that fits, so that the kernels
+            # see one signature (compiled once, by the warm-up)
+            self._succ = np.empty(n_entries, dtype=np.int32 if n_entries < 2**31 else np.int64)
+            self._order(keys, np.arange(self.n_rows, dtype=np.int64))
+            self._matrix = sp.csr_matrix(
+                (self._prob, self._succ, self._row_ptr),
+                shape=(self.n_rows, m.n_states),
+                copy=False,
+            )
+            # scipy may convert the index arrays: keep writing into the matrix's own arrays
+            self._prob = self._matrix.data
+            self._succ = self._matrix.indices
             return
-        ks = keys[self._succ]
-        broken = (ks[:-1] - ks[1:] > self.resort_tolerance) & (self._pos[1:] > 0)
-        if not broken.any():
-            return
-        rows = self._entry_row[1:][broken]
-        rows = rows[first_of_runs(rows)]
-        if rows.size * 4 > self.n_rows:
-            self._sort_all(keys)
-            return
-        starts = self._row_ptr[rows]
-        lens = self._row_ptr[rows + 1] - starts
-        idx = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(
-            starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens
-        )
-        local = _sort_rows(ks[idx], lens, self._pos[idx], self._max_len)
-        self._perm[idx] = self._perm[idx][local]
-        self._assign(idx)
-        self.n_sorts += 1
+        rows = unordered_rows(self._row_ptr, self._succ, keys, self.resort_tolerance)
+        if rows.size:
+            self._order(keys, rows)
 
     def matrix(self, values: np.ndarray) -> sp.csr_matrix:
         """The adversary's distributions as a sparse ``(n_rows, n_states)`` matrix (one row

@@ -141,3 +141,57 @@ def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
         crit2[i] = crit[r] + off
         rem2[i] = remaining[r]
     return new_ptr, rem2, succ2, lower2, gap2, crit2
+
+
+@numba.njit(cache=True, nogil=True)
+def order_rows(todo, row_ptr, successor, lower, upper, remaining, keys, perm, prob, succ):
+    """The ordering adversary's distribution of each row ``r`` in ``todo``, in place.
+
+    ``perm[row_ptr[r]:row_ptr[r + 1]]`` lists the row's entries (indices into the model's
+    ``successor``, ``lower``, ``upper``) in the adversary's order: it is insertion-sorted,
+    from its current order and stably (ties keep their places), by increasing
+    ``keys[successor]``. Then, in that order, ``prob = lower + clip(remaining - G, 0,
+    upper - lower)`` with ``G`` the gaps ``upper - lower`` of the entries before
+    (sequential sums), and ``succ`` the successors. A row whose order still stands costs
+    one pass.
+    """
+    for i in range(todo.size):
+        r = todo[i]
+        a = row_ptr[r]
+        b = row_ptr[r + 1]
+        for j in range(a + 1, b):
+            e = perm[j]
+            k = keys[successor[e]]
+            t = j - 1
+            while t >= a and keys[successor[perm[t]]] > k:
+                perm[t + 1] = perm[t]
+                t -= 1
+            perm[t + 1] = e
+        rem = remaining[r]
+        before = 0.0
+        for j in range(a, b):
+            e = perm[j]
+            g = upper[e] - lower[e]
+            add = rem - before
+            if add > g:
+                add = g
+            if add < 0.0:
+                add = 0.0
+            prob[j] = lower[e] + add
+            succ[j] = successor[e]
+            before += g
+
+
+@numba.njit(cache=True, nogil=True)
+def unordered_rows(row_ptr, succ, keys, tol):
+    """The rows whose successors ``succ[row_ptr[r]:row_ptr[r + 1]]`` are out of increasing
+    ``keys`` order by more than ``tol`` somewhere (increasing row indices)."""
+    out = np.empty(row_ptr.size - 1, dtype=np.int64)
+    n = 0
+    for r in range(row_ptr.size - 1):
+        for j in range(row_ptr[r] + 1, row_ptr[r + 1]):
+            if keys[succ[j - 1]] - keys[succ[j]] > tol:
+                out[n] = r
+                n += 1
+                break
+    return out[:n]

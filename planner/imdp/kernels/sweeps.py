@@ -16,8 +16,7 @@ import numba
 import numpy as np
 
 from planner.imdp.kernels.rows import all_row_values, gather_rows, row_value, scratch
-from planner.imdp.model import IMDP, first_of_runs
-from planner.imdp.ordering import row_entries
+from planner.imdp.model import IMDP, first_of_runs, row_entries
 
 
 @numba.njit(cache=True, nogil=True)

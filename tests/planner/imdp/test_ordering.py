@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from planner.imdp import IMDP, OrderingAdversary, best_case_expectation, worst_case_expectation
-from planner.imdp.ordering import segmented_cumsum
+from planner.imdp.kernels.rows import order_rows, unordered_rows
 from tests.planner.imdp.reference import random_imdp, ref_expectation, rows_of
 
 
@@ -60,20 +60,45 @@ def test_cached_order_follows_changing_values():
         assert np.allclose(adv.expectation(v2), worst_case_expectation(m, v2), atol=1e-13)
 
 
-def test_segmented_cumsum_restarts_per_segment():
-    x = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
-    pos = np.array([0, 1, 2, 0, 1, 0])
-    assert segmented_cumsum(x, pos, 3).tolist() == [1, 3, 6, 4, 9, 6]
-
-
 @pytest.mark.parametrize("lens", [[3, 1, 4, 2], [1, 1, 1, 200]])
-def test_row_sort_padded_and_long_row_paths(lens):
-    from planner.imdp.ordering import _sort_rows
-
+def test_order_rows_sorts_stably_from_the_current_order_and_hands_out_the_mass(lens):
     rng = np.random.default_rng(2)
     lens = np.array(lens)
-    keys = rng.integers(0, 3, size=lens.sum()).astype(float)  # many ties
+    n = int(lens.sum())
+    ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
     row = np.repeat(np.arange(lens.size), lens)
-    pos = np.arange(lens.sum()) - np.repeat(np.cumsum(lens) - lens, lens)
-    got = _sort_rows(keys, lens, pos, int(lens.max()))
-    assert got.tolist() == np.lexsort((keys, row)).tolist()
+    successor = rng.integers(0, 5, size=n).astype(np.int64)
+    values = rng.integers(0, 3, size=5).astype(float)  # many ties
+    lower = rng.uniform(0.0, 0.1, size=n) / lens[row]
+    gap = rng.uniform(0.0, 1.0, size=n) / lens[row]
+    remaining = 1.0 - np.bincount(row, weights=lower)
+    start = np.concatenate(
+        [rng.permutation(np.arange(ptr[i], ptr[i + 1])) for i in range(lens.size)]
+    )
+    perm, prob, succ = start.copy(), np.empty(n), np.empty(n, dtype=np.int64)
+    upper = lower + gap
+    order_rows(
+        np.arange(lens.size), ptr, successor, lower, upper, remaining, values, perm, prob, succ
+    )
+    # stable from the current order: ties keep the order they had in ``start``
+    expected = start[np.lexsort((np.arange(n), values[successor[start]], row))]
+    assert perm.tolist() == expected.tolist()
+    assert succ.tolist() == successor[perm].tolist()
+    for r in range(lens.size):
+        e = perm[ptr[r] : ptr[r + 1]]
+        before = np.concatenate(([0.0], np.cumsum(gap[e])[:-1]))
+        want = lower[e] + np.clip(remaining[r] - before, 0.0, upper[e] - lower[e])
+        np.testing.assert_allclose(prob[ptr[r] : ptr[r + 1]], want, rtol=0, atol=1e-15)
+
+
+def test_unordered_rows_flags_rows_out_of_order_beyond_the_slack():
+    ptr = np.array([0, 3, 4, 7, 9])
+    keys = np.array([0.0, 1.0, 2.0, 2.0 - 1e-9, 3.0])
+    succ = np.array([0, 1, 2, 4, 2, 3, 1, 1, 1])  # rows: sorted, single, 2 > 2-1e-9 > 1, ties
+    assert unordered_rows(ptr, succ, keys, 0.0).tolist() == [2]
+    assert unordered_rows(ptr, succ, keys, 1e-8).tolist() == [2]  # 2 - 1e-9 > 1 by ~1
+    succ[4:7] = [2, 3, 0]  # 2 then 2 - 1e-9: out of order by 1e-9 only, then 0 after it
+    assert unordered_rows(ptr, succ, keys, 0.0).tolist() == [2]
+    succ[6] = 4
+    assert unordered_rows(ptr, succ, keys, 1e-8).tolist() == []
+    assert unordered_rows(ptr, succ, keys, 0.0).tolist() == [2]
