@@ -50,13 +50,9 @@ class OrderingAdversary:
         self.minimize = bool(minimize)
         self.resort_tolerance = float(resort_tolerance)
         m = model
-        if rows is None:
-            self.rows = np.arange(m.n_rows, dtype=np.int64)
-            self._row_ptr = np.array(m.row_ptr, dtype=np.int64)  # writable, as below
-        else:
-            self.rows = np.asarray(rows, dtype=np.int64)
-            lens = m.row_ptr[self.rows + 1] - m.row_ptr[self.rows]
-            self._row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
+        self.rows = np.asarray(np.arange(m.n_rows) if rows is None else rows, dtype=np.int64)
+        lens = m.row_ptr[self.rows + 1] - m.row_ptr[self.rows]
+        self._row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
         self.n_rows = int(self.rows.size)
         self._remaining = 1.0 - m.row_lower_sum[self.rows]
         self._perm: np.ndarray | None = None
@@ -65,7 +61,7 @@ class OrderingAdversary:
         self._prob: np.ndarray | None = None
         self._matrix: sp.csr_matrix | None = None
         self.n_sorts = 0
-        """How many times rows were (re-)sorted (a full sort counts once)."""
+        """How many times rows were (re-)sorted (each update that re-sorted counts once)."""
 
     def _keys(self, values: np.ndarray) -> np.ndarray:
         # a fresh writable array either way: one kernel signature for every caller

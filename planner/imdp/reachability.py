@@ -336,11 +336,10 @@ def rounding_widened(
       (:func:`planner.imdp.evaluate.shortest_stay_choice`) up to ``_SI_MAX_STATES`` free
       states, beyond which no sparse LU runs, until the widening fits in the room left to
       ``tolerance`` (or a tenth of an open bracket;
-      :func:`planner.imdp.evaluate.widening_room`). It stands in
-      for an
-      optimal strategy: exact where the optimal one is unique, and where the optimal
-      strategies all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden)
-      it widens the bracket as it must.
+      :func:`planner.imdp.evaluate.widening_room`). It stands in for an optimal
+      strategy: exact where the optimal one is unique, and where the optimal strategies
+      all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden) it widens
+      the bracket as it must.
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
     """

@@ -317,20 +317,7 @@ def component_exit_bound(
         best = 0.0
         for k in range(exit_ptr[c], exit_ptr[c + 1]):
             r = exit_rows[k]
-            q = row_value(
-                row_ptr[r],
-                row_ptr[r + 1],
-                remaining[r],
-                succ,
-                lower,
-                gap,
-                v,
-                sign,
-                crit,
-                r,
-                idx,
-                keys,
-            )
+            q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             if q > best:
                 best = q
         for k in range(member_ptr[c], member_ptr[c + 1]):

@@ -49,10 +49,9 @@ def _sorted_value(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def row_value(
-    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
-):
-    """The ordering adversary's ``sum_j p_j v[succ_j]`` over the entries ``a:b``.
+def row_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit, idx, keys):
+    """The ordering adversary's ``sum_j p_j v[succ_j]`` over the entries
+    ``row_ptr[r]:row_ptr[r + 1]`` of row ``r`` (``remaining[r] = 1 - sum(l)``).
 
     With keys ``k_j = sign * v[succ_j]`` (``sign = 1``: the minimising adversary) the
     adversary gives every successor its lower bound and the remaining mass
@@ -65,7 +64,10 @@ def row_value(
     threshold from the last call is tried first (one pass, no sorting, no branches on the
     values); if the new values moved it, the row is sorted.
     """
-    if remaining > 0.0:
+    a = row_ptr[r]
+    b = row_ptr[r + 1]
+    rem = remaining[r]
+    if rem > 0.0:
         t = sign * v[succ[crit[r]]]
         lv = 0.0
         g_less = 0.0
@@ -80,9 +82,9 @@ def row_value(
             g_less += g if below else 0.0
             short += g * d if below else 0.0
             g_eq += g if d == 0.0 else 0.0
-        if g_less <= remaining and remaining <= g_less + g_eq:
-            return sign * (lv + remaining * t - short)
-    return _sorted_value(a, b, remaining, succ, lower, gap, v, sign, crit, r, idx, keys)
+        if g_less <= rem and rem <= g_less + g_eq:
+            return sign * (lv + rem * t - short)
+    return _sorted_value(a, b, rem, succ, lower, gap, v, sign, crit, r, idx, keys)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -101,20 +103,7 @@ def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_mini
     idx, keys = scratch(row_ptr)
     out = np.empty(row_ptr.size - 1)
     for r in range(row_ptr.size - 1):
-        out[r] = row_value(
-            row_ptr[r],
-            row_ptr[r + 1],
-            remaining[r],
-            succ,
-            lower,
-            gap,
-            v,
-            sign,
-            crit,
-            r,
-            idx,
-            keys,
-        )
+        out[r] = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
     return out
 
 

@@ -60,20 +60,7 @@ def gauss_seidel_sweep(
         best = -np.inf if maximize else np.inf
         arg = lo
         for r in range(lo, hi):
-            q = row_value(
-                row_ptr[r],
-                row_ptr[r + 1],
-                remaining[r],
-                succ,
-                lower,
-                gap,
-                v,
-                sign,
-                crit,
-                r,
-                idx,
-                keys,
-            )
+            q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             if (q > best) if maximize else (q < best):
                 best = q
                 arg = r
@@ -158,36 +145,12 @@ def upper_sweep(
                     best = cache[top]
                     break
                 cache[top] = row_value(
-                    row_ptr[top],
-                    row_ptr[top + 1],
-                    remaining[top],
-                    succ,
-                    lower,
-                    gap,
-                    u,
-                    sign,
-                    crit,
-                    top,
-                    idx,
-                    keys,
+                    top, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
                 )
                 fresh[top - lo] = True
         else:
             for r in range(lo, hi):
-                q = row_value(
-                    row_ptr[r],
-                    row_ptr[r + 1],
-                    remaining[r],
-                    succ,
-                    lower,
-                    gap,
-                    u,
-                    sign,
-                    crit,
-                    r,
-                    idx,
-                    keys,
-                )
+                q = row_value(r, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys)
                 if (q > best) if maximize else (q < best):
                     best = q
         old = u[s]
