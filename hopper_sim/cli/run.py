@@ -14,6 +14,8 @@ import argparse
 import dataclasses
 import json
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from hopnav.arguments import (
@@ -187,6 +189,65 @@ class _Finished:
         self.current = None
 
 
+class _WholeEvents:
+    """Hands each event to every observer before an interrupt lands.
+
+    While :meth:`interrupts_between_events` is active, SIGINT and SIGTERM raise
+    ``KeyboardInterrupt`` at once, except while an event is being handed out: then it is
+    raised when every observer has the event. Otherwise the count of finished runs, the
+    recording and the figure could disagree by the run whose end the signal split.
+    """
+
+    def __init__(self, fan) -> None:
+        self.fan = fan
+        self._busy = False
+        self._pending: int | None = None
+
+    def _signal(self, signum: int, frame) -> None:
+        if self._busy:
+            self._pending = signum
+        else:
+            raise KeyboardInterrupt(f"signal {signum}")
+
+    @contextmanager
+    def interrupts_between_events(self) -> Iterator[None]:
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        kinds = (signal.SIGINT, signal.SIGTERM)
+        previous = [signal.signal(k, self._signal) for k in kinds]
+        try:
+            yield
+        finally:
+            for k, handler in zip(kinds, previous, strict=True):
+                signal.signal(k, handler)
+
+    def _deliver(self, handler, event) -> None:
+        self._busy = True
+        try:
+            handler(event)
+        finally:
+            self._busy = False
+        if self._pending is not None:
+            signum, self._pending = self._pending, None
+            raise KeyboardInterrupt(f"signal {signum}")
+
+    def on_run_start(self, event) -> None:
+        self._deliver(self.fan.on_run_start, event)
+
+    def on_hop(self, event) -> None:
+        self._deliver(self.fan.on_hop, event)
+
+    def on_synthesis(self, event) -> None:
+        self._deliver(self.fan.on_synthesis, event)
+
+    def on_run_end(self, event) -> None:
+        self._deliver(self.fan.on_run_end, event)
+
+
 def _load_learner(path: str, expected: dict):
     """The Q-learner saved in ``path``, refused unless it was learnt on the same scenario."""
     from hopper_sim.experiments.provenance import ProvenanceError, require_same_scenario
@@ -335,12 +396,15 @@ def run(args: argparse.Namespace) -> int:
     if png is not None:
         writer = FigureWriter(png, n_runs=n_runs, metadata=prov)
         observers.append(writer)
-    runner.observer = fan = Observers(observers)
+    fan = Observers(observers)
+    whole = _WholeEvents(fan)
+    runner.observer = whole
     files = {"rrd": None if rrd is None else str(rrd), "png": None if png is None else str(png)}
     seed = sc.runner.seed
     failure: str | None = None
     try:
-        runner.run_many(n_runs, seed)
+        with whole.interrupts_between_events():
+            runner.run_many(n_runs, seed)
     except KeyboardInterrupt:
         failure = "interrupted"
     except Exception as err:  # a failed run: keep what finished, then report it

@@ -1,6 +1,11 @@
 """`hopnav run` end to end on a short horizon: JSON, recording and figure of a real run."""
 
 import json
+import os
+import signal
+import time
+
+import pytest
 
 from hopper_sim.cli import main
 from hopper_sim.viz.recording_reader import summarize_recording
@@ -66,3 +71,31 @@ def test_a_product_beyond_the_limits_is_refused_before_the_first_hop(tmp_path, c
     assert code == 2 and len(err.splitlines()) == 1, err
     assert "scenario a: the product of 226 model states and 3 automaton states" in err
     assert "more than the limit of 1000" in err and not rrd.exists()
+
+
+@pytest.mark.parametrize("kind", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_during_an_event_lands_after_every_observer_has_it(kind):
+    from hopper_sim.cli.run import _WholeEvents
+    from hopper_sim.navigation.events import Observer, Observers
+
+    got = []
+
+    class Signals(Observer):
+        def on_run_end(self, event):
+            got.append(("first", event))
+            os.kill(os.getpid(), kind)  # the handler runs here, mid-event
+            got.append(("first, after the signal", event))
+
+    class Later(Observer):
+        def on_run_end(self, event):
+            got.append(("later", event))
+
+    whole = _WholeEvents(Observers([Signals(), Later()]))
+    with whole.interrupts_between_events():
+        with pytest.raises(KeyboardInterrupt):
+            whole.on_run_end("end")
+        assert [g[0] for g in got] == ["first", "first, after the signal", "later"]
+        with pytest.raises(KeyboardInterrupt):  # between events: at once
+            os.kill(os.getpid(), kind)
+            time.sleep(1.0)
+    assert signal.getsignal(kind) is not whole._signal  # restored
