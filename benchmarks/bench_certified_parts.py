@@ -5,7 +5,10 @@
    (``benchmarks/bench_vi.py``), ``I - P`` on the states that reach the target, factorised
    by SuperLU's defaults (column ordering COLAMD, partial pivoting) and by ``chain_lu``
    (diagonal pivots, symmetric ordering of ``A + A^T``). Prints seconds (minimum of 5),
-   the fill ``nnz(L + U)`` and the residual of one solve for each, and the ratio.
+   the fill ``nnz(L + U)`` and the residual of one solve for each, and the ratio; then
+   ``chain_lu`` of the same chain with the ordering of an earlier factorisation of its
+   pattern reused (:class:`planner.imdp.evaluate.ChainOrderings`, as in the adversary's
+   rounds of one strategy's evaluation) against a fresh ``chain_lu``.
 2. **Interval iteration's rounds** (:mod:`planner.imdp.interval`): the worst-case
    satisfaction on the same product with the pass from above on the second thread (the
    default) and with both sides in turn on one thread (minimum of 3 each); the two
@@ -32,7 +35,7 @@ from scipy.sparse.linalg import splu
 
 from benchmarks.bench_vi import make_grid, until_automaton
 from planner.imdp.analysis import satisfaction
-from planner.imdp.evaluate import chain_lu, reaching
+from planner.imdp.evaluate import ChainOrderings, chain_lu, reaching
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.product import ProductIMDP
@@ -100,6 +103,14 @@ def main() -> None:
         res = np.max(np.abs(a @ lu.solve(b) - b))
         print(f"  {name:17s} {t:.4f} s, fill {lu.L.nnz + lu.U.nnz}, residual {res:.1e}")
     print(f"  ratio defaults/chain_lu = {t_plain / t_chain:.2f}")
+    orderings = ChainOrderings()
+    chain_lu(sub, orderings)
+    again, t_again = best_of(lambda: chain_lu(sub, orderings), 5)
+    res = np.max(np.abs(a @ again.solve(b) - b))
+    print(
+        f"  chain_lu, ordering reused {t_again:.4f} s, fill {again.fill}, residual {res:.1e}; "
+        f"ratio fresh/reused = {t_chain / t_again:.2f}"
+    )
 
     interval = importlib.import_module("planner.imdp.interval")
     threaded, t_threaded = best_of(lambda: satisfaction(prod), 3)

@@ -121,7 +121,7 @@ class ChainError:
         return out
 
 
-def chain_lu(sub: sp.spmatrix):
+def chain_lu(sub: sp.spmatrix, orderings: ChainOrderings | None = None):
     """Sparse LU of ``A = I - sub`` for a substochastic ``sub`` (rows summing to at most 1)
     whose chain leaves from every state (``A`` non-singular).
 
@@ -130,16 +130,76 @@ def chain_lu(sub: sp.spmatrix):
     and the growth factor is at most 2 without any pivoting. The factorisation therefore
     keeps the diagonal pivots and a symmetric fill-reducing ordering of ``A + A^T``
     (SuperLU's symmetric mode): on the 100 x 100 benchmark grid's chains about half the
-    fill of the default column ordering with partial pivoting, and 1.5-2x faster.
+    fill of the default column ordering with partial pivoting, and 1.5-2x faster. Any
+    symmetric permutation of ``A`` is again such an M-matrix, so an ordering found for
+    one chain serves every chain of the same sparsity pattern (``orderings``:
+    :class:`ChainOrderings`).
     """
     a = (sp.identity(sub.shape[0], format="csc") - sub).tocsc()
-    return splu(
-        a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-    )
+    if orderings is not None:
+        return orderings.factor(a)
+    return _symmetric_lu(a, "MMD_AT_PLUS_A")
+
+
+def _symmetric_lu(a: sp.csc_matrix, permc_spec: str):
+    return splu(a, permc_spec=permc_spec, diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+
+
+class _PermutedLU:
+    """The LU of ``A[p][:, p]``, solving systems of ``A``."""
+
+    def __init__(self, lu, perm: np.ndarray) -> None:
+        self._lu, self._perm = lu, perm
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.empty_like(b, dtype=np.float64)
+        x[self._perm] = self._lu.solve(b[self._perm])
+        return x
+
+    @property
+    def fill(self) -> int:
+        """``nnz(L + U)`` of the factors."""
+        return int(self._lu.L.nnz + self._lu.U.nnz)
+
+
+class ChainOrderings:
+    """The fill-reducing ordering of the last chain factorised, reused for the next chain
+    with the same sparsity pattern: the adversary-improvement rounds of one strategy's
+    evaluation (:func:`strategy_reach_value`) change the chain's probabilities, not its
+    pattern, when every lower bound is positive. The minimum-degree ordering depends on
+    the pattern alone, so the factors are those of :func:`chain_lu`, computed without a
+    third of its work (the ordering; see ``benchmarks/bench_certified_parts.py``)."""
+
+    def __init__(self) -> None:
+        self._pattern: tuple[np.ndarray, np.ndarray] | None = None
+        self._perm = np.zeros(0, dtype=np.int64)
+        self.reused = 0
+        """Factorisations that reused an ordering."""
+
+    def factor(self, a: sp.csc_matrix):
+        a.sort_indices()
+        pattern = self._pattern
+        if (
+            pattern is not None
+            and np.array_equal(pattern[0], a.indptr)
+            and np.array_equal(pattern[1], a.indices)
+        ):
+            self.reused += 1
+            perm = self._perm
+            return _PermutedLU(_symmetric_lu(a[perm][:, perm].tocsc(), "NATURAL"), perm)
+        lu = _symmetric_lu(a, "MMD_AT_PLUS_A")
+        self._pattern = (a.indptr.copy(), a.indices.copy())
+        self._perm = np.empty(a.shape[0], dtype=np.int64)
+        self._perm[lu.perm_c] = np.arange(a.shape[0])
+        return lu
 
 
 def chain_reach(
-    matrix: sp.csr_matrix, states: np.ndarray, fixed_val: np.ndarray, error: bool = False
+    matrix: sp.csr_matrix,
+    states: np.ndarray,
+    fixed_val: np.ndarray,
+    error: bool = False,
+    orderings: ChainOrderings | None = None,
 ) -> np.ndarray | tuple[np.ndarray, ChainError]:
     """Least solution of ``x_s = sum_j matrix[i, j] x_j`` for ``s = states[i]``.
 
@@ -153,6 +213,8 @@ def chain_reach(
         states: the states being solved for (sorted, distinct).
         fixed_val: ``(n_states,)`` values of all other states (read only there).
         error: also return the elementwise rounding bounds (:class:`ChainError`).
+        orderings: reuse the ordering of an earlier chain of the same pattern
+            (:class:`ChainOrderings`).
 
     Returns:
         ``(n_states,)``: ``fixed_val`` outside ``states``, the reachability values on them;
@@ -174,7 +236,7 @@ def chain_reach(
     err = ChainError(base.size, live, states[live], None, np.zeros(0))
     if live.size:
         sub = inner[live][:, live]
-        lu = chain_lu(sub)
+        lu = chain_lu(sub, orderings)
         own = states[live].astype(np.int64)
         rows = matrix[live].tocsr()
         indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
@@ -241,10 +303,11 @@ def _settled_chain(
     rows, states = rows[keep], states[keep]
     adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
     x = np.where(pos, start, base)
+    orderings = ChainOrderings()
     for _ in range(max_rounds):
         matrix = adv.matrix(x)
         sorts = adv.n_sorts
-        x, err = chain_reach(matrix, states, base, error=True)
+        x, err = chain_reach(matrix, states, base, error=True, orderings=orderings)
         adv.update(x)
         if adv.n_sorts == sorts:
             # the accepted order may miss the exact minimiser by the slack: its defect at

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from planner.imdp.evaluate import chain_reach
+from planner.imdp.evaluate import ChainOrderings, chain_lu, chain_reach
 from planner.imdp.kernels import chain_residual
 
 
@@ -239,3 +239,37 @@ def test_shortest_stay_choice_reaches_the_enumerated_minimum(seed):
         shortest_stay_choice(matrix, rs, start, limit=1.001 * _stays(matrix, rs, start).max()),
         start,
     )
+
+
+def test_chain_orderings_reuse_the_ordering_of_a_chain_with_the_same_pattern():
+    rng = np.random.default_rng(11)
+    n = 300
+    first = _cycle(rng, n, 1e-3)[:, :n]
+    # the same pattern with other probabilities (an adversary's other distribution)
+    second = first.copy()
+    second.data *= rng.uniform(0.5, 1.0, size=second.data.size)
+    # another pattern: one more edge per row
+    extra = sp.csr_matrix((np.full(n, 1e-4), (np.arange(n), (np.arange(n) + 3) % n)), shape=(n, n))
+    third = (first * 0.9 + extra).tocsr()
+    orderings = ChainOrderings()
+    b = rng.uniform(0.0, 1.0, size=n)
+    for k, sub in enumerate((first, second, second, third)):
+        a = (sp.identity(n, format="csc") - sub).tocsc()
+        lu = chain_lu(sub, orderings)
+        fresh = chain_lu(sub)
+        x = lu.solve(b)
+        assert np.max(np.abs(a @ x - b)) < 1e-10
+        np.testing.assert_allclose(x, fresh.solve(b), rtol=1e-10, atol=1e-12)
+        assert orderings.reused == [0, 1, 2, 2][k]
+
+
+def test_chain_orderings_keep_the_fill_of_a_fresh_ordering():
+    rng = np.random.default_rng(5)
+    n = 400
+    sub = _cycle(rng, n, 1e-2)[:, :n]
+    orderings = ChainOrderings()
+    chain_lu(sub, orderings)
+    reused = chain_lu(sub, orderings)
+    fresh = chain_lu(sub)
+    assert orderings.reused == 1
+    assert reused.fill == fresh.L.nnz + fresh.U.nnz
