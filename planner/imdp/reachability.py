@@ -46,19 +46,19 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner.imdp import certify, strategy
-from planner.imdp.evaluate import (
-    chain_stay_allowance,
-    shortest_stay_choice,
-    stay_limit,
-    surest_exit_start,
-    widening_room,
-)
 from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.kernels.sweeps import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
+from planner.imdp.stay import (
+    chain_stay_allowance,
+    shortest_stay_choice,
+    stay_limit,
+    surest_exit_start,
+    widening_room,
+)
 
 _OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
@@ -325,18 +325,18 @@ def rounding_widened(
     The checks accept ``T(U) <= U + ROUNDING`` and every evaluation is rounded, so along a
     strategy ``sigma`` whose rows satisfy that (with the adversary ``P`` of ``U``), ``U``
     is only known to be at least ``V_sigma - A^-1 e`` (``e`` the allowance per step,
-    :func:`planner.imdp.evaluate.chain_stay_allowance`; 0 where that chain never leaves the
+    :func:`planner.imdp.stay.chain_stay_allowance`; 0 where that chain never leaves the
     free states, the strategy's value there being 0). ``V*`` is the value of an optimal
     strategy, so ``U + A^-1 e`` of one bounds it:
 
     * minimising strategy: the strategy greedy for ``U`` is that witness;
     * maximising strategy: an optimal strategy's rows are within ``U - L`` of the best at
       ``U``; among those rows one of short stay is taken: the greedy surest exit
-      (:func:`planner.imdp.evaluate.surest_exit_start`), shortened by policy iteration
-      (:func:`planner.imdp.evaluate.shortest_stay_choice`) up to ``_SI_MAX_STATES`` free
+      (:func:`planner.imdp.stay.surest_exit_start`), shortened by policy iteration
+      (:func:`planner.imdp.stay.shortest_stay_choice`) up to ``_SI_MAX_STATES`` free
       states, beyond which no sparse LU runs, until the widening fits in the room left to
       ``tolerance`` (or a tenth of an open bracket;
-      :func:`planner.imdp.evaluate.widening_room`). It stands in for an optimal
+      :func:`planner.imdp.stay.widening_room`). It stands in for an optimal
       strategy: exact where the optimal one is unique, and where the optimal strategies
       all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden) it widens
       the bracket as it must.

@@ -11,17 +11,17 @@ import scipy.sparse as sp
 
 from planner.imdp.decoupled import operator
 from planner.imdp.decoupled.model import DecoupledIMDP
-from planner.imdp.evaluate import (
-    chain_reach,
+from planner.imdp.evaluate import chain_reach
+from planner.imdp.kernels.sweeps import ROUNDING
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.solve import Solution, ValueIteration
+from planner.imdp.stay import (
     chain_stay_allowance,
     shortest_stay_choice,
     stay_limit,
     surest_exit_start,
     widening_room,
 )
-from planner.imdp.kernels.sweeps import ROUNDING
-from planner.imdp.model import IMDP, first_of_runs
-from planner.imdp.solve import Solution, ValueIteration
 
 
 def _backward_reach(model: DecoupledIMDP, target: np.ndarray, blocked: np.ndarray) -> np.ndarray:
@@ -138,7 +138,7 @@ def rounding_widened(
     certificate (the checks accept ``T(U) <= U + 1e-15``; every row evaluation is rounded):
     the allowance summed over the expected stay of the strategy of shortest stay among the
     rows within ``U - L`` of the best at ``U``, each with the adversary's distribution at
-    ``U`` (:func:`planner.imdp.evaluate.chain_stay_allowance`, as
+    ``U`` (:func:`planner.imdp.stay.chain_stay_allowance`, as
     :func:`planner.imdp.reachability.rounding_widened` for interval MDPs); converged only
     if the bracket still closes. Unconverged solutions are returned as they are."""
     if not sol.converged:

@@ -1,0 +1,186 @@
+"""Expected stays of chains: the allowance a rounding-tolerant check costs, and strategies
+that keep it small.
+
+A check that accepts ``T(U) <= U + e`` (``e`` the floating-point noise of one evaluation)
+certifies ``U >= V_sigma - A^-1 e`` only, ``A = I - P`` on the states the chain of a
+strategy and its adversary leaves: the noise summed over the expected stay
+(:func:`chain_stay_allowance`). The bracket is widened by that allowance, so the upper
+bound's check needs a strategy whose stays are short (:func:`surest_exit_start`,
+:func:`shortest_stay_choice`), within the room the tolerance leaves
+(:func:`widening_room`, :func:`stay_limit`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from planner.imdp.evaluate import DUST, SOLVE_MARGIN, chain_lu, reaching, row_rounding
+from planner.imdp.kernels import counting_order, surest_exit_choice
+from planner.imdp.model import first_of_runs, run_ids
+
+
+def chain_stay_allowance(
+    matrix: sp.csr_matrix,
+    states: np.ndarray,
+    upper: np.ndarray,
+    per_step: float,
+    direct_limit: int = 20_000,
+) -> np.ndarray:
+    """``A^-1 a`` for the chain ``matrix`` (one distribution per state of ``states``, over
+    all states): the allowance ``a = per_step + m`` (``m``: :func:`row_rounding` at
+    ``upper``, a bound on the rounding of each evaluation) summed over the expected stay
+    among the ``states`` of positive ``upper`` (states at 0 count as left: their rows'
+    values and margins are 0), shape ``(n_states,)``. States from which the chain never
+    leaves get 0: the strategy's value there is 0. Sparse LU for at most ``direct_limit``
+    states, else a checked supersolution of Jacobi sweeps (``inf`` where none is found).
+
+    A check that accepts ``T(U) <= U + e`` per state (floating-point noise of ``e`` per
+    evaluation) certifies less than ``T(U) <= U``: along a strategy ``sigma`` with its
+    adversary ``P``, ``U >= P U - e`` gives ``U >= V_sigma - A^-1 e`` only (``A = I - P``
+    on the states the chain leaves; on a closed class ``V_sigma = 0 <= U``); on a chain
+    that stays ``1e7`` steps, ``1e-15`` per step is ``1e-8``.
+    """
+    matrix = sp.csr_matrix(matrix, copy=True)
+    states = np.asarray(states, dtype=np.int64)
+    positive = upper[states] > 0.0
+    states = states[positive]
+    matrix = matrix[positive]
+    a = per_step + row_rounding(matrix.indptr, matrix.indices, upper, per_entry=3.0)
+    inner = matrix[:, states].tocsr()
+    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
+    transient = reaching(inner, leak > DUST)
+    out = np.zeros(upper.size)
+    idx = np.flatnonzero(transient)
+    if idx.size:
+        sub = inner[idx][:, idx]
+        if idx.size <= direct_limit:
+            lu = chain_lu(sub)
+            out[states[idx]] = (1.0 + SOLVE_MARGIN) * np.maximum(lu.solve(a[idx]), 0.0)
+        else:
+            out[states[idx]] = _stay_supersolution(sub.tocsr(), a[idx])
+    return out
+
+
+def _inner_rows(matrix: sp.csr_matrix, row_states: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The candidate rows restricted to their own states (mass elsewhere leaves), columns
+    renumbered in state order, and those states."""
+    rs = np.asarray(row_states, dtype=np.int64)
+    states = rs[first_of_runs(rs)]
+    matrix = sp.csr_matrix(matrix)
+    pos = np.full(matrix.shape[1], -1, dtype=np.int64)
+    pos[states] = np.arange(states.size)
+    cols = np.flatnonzero(pos >= 0)
+    inner = matrix[:, cols].tocsr()
+    inner = sp.csr_matrix(
+        (inner.data, pos[cols][inner.indices], inner.indptr), shape=(rs.size, states.size)
+    )
+    return inner, states
+
+
+def surest_exit_start(
+    matrix: sp.csr_matrix, row_states: np.ndarray, fallback: np.ndarray | None = None
+) -> np.ndarray:
+    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
+    over all states; ``row_states`` their states, sorted, at least one per state) whose
+    chain leaves these states from every state that can leave them: the greedy choice of
+    :func:`planner.imdp.kernels.surest_exit_choice` (rows with the largest one-step mass
+    towards the exit), a good start for :func:`shortest_stay_choice`; ``fallback`` (a
+    candidate index per state) where no path leaves, -1 there without one. Returns
+    candidate indices."""
+    inner, states = _inner_rows(matrix, row_states)
+    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
+    leak[leak <= DUST] = 0.0
+    local = run_ids(np.asarray(row_states, dtype=np.int64))
+    coo = inner.tocoo()
+    order, ptr = counting_order(coo.col.astype(np.int64), states.size)
+    choice = surest_exit_choice(
+        local, leak, states.size, ptr, coo.row[order].astype(np.int64), coo.data[order]
+    )
+    if fallback is None:
+        return choice
+    return np.where(choice >= 0, choice, np.asarray(fallback, dtype=np.int64))
+
+
+def widening_room(lower: np.ndarray, upper: np.ndarray, tolerance: float) -> float:
+    """How much the rounding widening may add to a bracket: what is left to ``tolerance``
+    of the widest, or a tenth of that width when it already exceeds the tolerance (an open
+    bracket need not be widened minimally). Only bounds the effort spent on a short-stay
+    witness; the widening itself is always the witness's full allowance."""
+    width = float(np.max(upper - lower)) if upper.size else 0.0
+    return max(tolerance - width, 0.1 * width, 0.0)
+
+
+def stay_limit(matrix: sp.csr_matrix, upper: np.ndarray, per_step: float, room: float) -> float:
+    """The expected stay up to which :func:`chain_stay_allowance` of any selection of the
+    rows of ``matrix`` (evaluated at ``upper``, ``per_step`` allowance per step) stays
+    within ``room``: ``room / ((1 + margin) max a)``, ``a`` the per-step allowance of each
+    row; 0 without room."""
+    if room <= 0.0 or matrix.shape[0] == 0:
+        return 0.0
+    top = per_step + float(np.max(row_rounding(matrix.indptr, matrix.indices, upper, 3.0)))
+    return room / ((1.0 + SOLVE_MARGIN) * top)
+
+
+def shortest_stay_choice(
+    matrix: sp.csr_matrix,
+    row_states: np.ndarray,
+    start: np.ndarray,
+    rounds: int = 50,
+    limit: float = 0.0,
+) -> np.ndarray:
+    """Per state one of the candidate rows (``matrix``: one distribution per candidate,
+    over all states; ``row_states`` their states, sorted, at least one per state), chosen
+    to keep the expected stay among these states short: policy iteration for the minimal
+    expected number of steps from ``start`` (a candidate index per state, in state order;
+    :func:`surest_exit_start` gives a good one), ``rounds`` evaluations at most, until no
+    state improves or every stay of a leaving state is at most ``limit`` (short enough:
+    :func:`stay_limit`); a state whose chain never leaves counts as staying for ever.
+    Returns candidate indices, one per state (each improvement only shortens the
+    stays)."""
+    rs = np.asarray(row_states, dtype=np.int64)
+    seg = first_of_runs(rs)
+    seg_id = run_ids(rs)
+    inner, states = _inner_rows(matrix, rs)
+    choice = np.asarray(start, dtype=np.int64)
+    for _ in range(rounds):
+        sub = inner[choice]
+        leak = 1.0 - np.asarray(sub.sum(axis=1)).ravel()
+        live = reaching(sub, leak > DUST)
+        w = np.full(states.size, 1e300)
+        idx = np.flatnonzero(live)
+        if idx.size:
+            w[idx] = chain_lu(sub[idx][:, idx]).solve(np.ones(idx.size))
+            if np.max(w[idx]) <= limit:
+                break
+        cost = 1.0 + inner @ w
+        best = np.minimum.reduceat(cost, seg)
+        better = best < cost[choice] * (1.0 - 1e-9)
+        if not better.any():
+            break
+        top = np.flatnonzero(cost <= best[seg_id])
+        top = top[first_of_runs(seg_id[top])]
+        choice = np.where(better, top, choice)
+    return choice
+
+
+_STAY_SWEEPS = 2_000
+"""Jacobi sweeps of the expected stay on models too large for a sparse LU."""
+
+
+def _stay_supersolution(sub: sp.csr_matrix, a: np.ndarray) -> np.ndarray:
+    """An upper bound of ``(I - sub)^-1 a`` without a factorisation: Jacobi sweeps
+    ``w <- a + sub w`` from ``a`` until they change by under 1e-3 relative, then ``1.05 w``
+    is kept if it is a supersolution, ``a + sub (1.05 w) <= 1.05 w`` (then it bounds the
+    least solution); ``inf`` where that fails or the sweeps run out."""
+    w = a.copy()
+    for _ in range(_STAY_SWEEPS):
+        nxt = a + sub @ w
+        done = np.max(nxt - w) <= 1e-3 * np.max(nxt)
+        w = nxt
+        if done:
+            cand = 1.05 * w
+            if np.all(a + sub @ cand <= cand):
+                return cand
+            break
+    return np.full(a.size, np.inf)

@@ -1,0 +1,149 @@
+"""Expected stays of chains (planner.imdp.stay): the rounding allowance and the
+short-stay strategies."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from planner.imdp.evaluate import reaching
+
+
+def test_stay_allowance_without_a_factorisation_bounds_the_direct_one():
+    # a corridor 0..19: up with 0.5 (19 -> the goal 20), down with 0.4 (0 stays), a sink
+    # 21 with 0.1; one action per state, point intervals
+    from planner.imdp import IMDP
+    from planner.imdp.ordering import OrderingAdversary
+    from planner.imdp.stay import chain_stay_allowance
+
+    n = 22
+    s, a, t, p = [20, 21], [0, 0], [20, 21], [1.0, 1.0]
+    for i in range(20):
+        s += [i] * 3
+        a += [0] * 3
+        t += [i + 1, max(i - 1, 0) if i > 0 else 0, 21]
+        p += [0.5, 0.4, 0.1]
+    m = IMDP(n, s, a, t, p, p, labels=[()] * 20 + [("g",), ()])
+    rows = np.flatnonzero(m.row_state < 20)
+    upper = np.concatenate((np.linspace(0.1, 0.9, 20), [1.0, 0.0]))
+    chain = OrderingAdversary(m, True, rows=rows).matrix(upper)
+    direct = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15)
+    jacobi = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15, direct_limit=0)
+    free = np.arange(20)
+    assert np.all(direct[free] > 0) and np.all(np.isfinite(jacobi[free]))
+    assert np.all(jacobi[free] >= direct[free]) and np.all(jacobi[free] <= 1.06 * direct[free])
+    assert direct[20] == direct[21] == 0.0
+
+
+def _candidates(rng: np.random.Generator, n: int, closed: int) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Two or three random candidate rows per state over ``n`` states plus an exit column
+    ``n``; the last ``closed`` states only ever move among themselves; the first row of
+    every fifth other state leaves with 0.3."""
+    rows, cols, vals, row_states = [], [], [], []
+    r = 0
+    for s in range(n):
+        for j in range(rng.integers(2, 4)):
+            pool = np.arange(n - closed, n) if s >= n - closed else np.arange(n + 1)
+            k = min(rng.integers(1, 4), pool.size)
+            succ = rng.choice(pool, size=k, replace=False)
+            p = rng.dirichlet(np.ones(k))
+            if s < n - closed and j == 0 and s % 5 == 0:
+                succ, p = np.append(succ[succ != n], n), np.append(0.7 * p[succ != n], 0.3)
+                p /= p.sum()
+            elif s < n - closed and rng.random() < 0.6:
+                p[succ == n] = 0.0  # most rows of open states do not leave directly
+                if p.sum() == 0.0:
+                    p[0], succ[0] = 1.0, (s + 1) % (n - closed)
+                p /= p.sum()
+            rows += [r] * len(succ)
+            cols += list(succ)
+            vals += list(p)
+            row_states.append(s)
+            r += 1
+    return sp.csr_matrix((vals, (rows, cols)), shape=(r, n + 1)), np.array(row_states)
+
+
+def _stays(matrix: sp.csr_matrix, row_states: np.ndarray, choice: np.ndarray) -> np.ndarray:
+    """Expected steps among the states before leaving (inf where the chain may stay for
+    ever: it can reach states without a path out)."""
+    n = matrix.shape[1] - 1
+    states = np.unique(row_states)
+    sub = matrix[choice][:, states].toarray()
+    live = reaching(sp.csr_matrix(sub), 1.0 - sub.sum(axis=1) > 1e-12)
+    stuck = reaching(sp.csr_matrix(sub), ~live)
+    out = np.full(states.size, np.inf)
+    idx = np.flatnonzero(~stuck)
+    out[idx] = np.linalg.solve(np.eye(idx.size) - sub[np.ix_(idx, idx)], np.ones(idx.size))
+    assert n == states.size
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_surest_exit_start_leaves_from_every_state_that_can_leave(seed):
+    from planner.imdp.stay import surest_exit_start
+
+    rng = np.random.default_rng(seed)
+    n, closed = 30, 4
+    matrix, rs = _candidates(rng, n, closed)
+    choice = surest_exit_start(matrix, rs)
+    edges = sp.csr_matrix(((matrix.data > 0).astype(float), matrix.indices, matrix.indptr))
+    union = sp.csr_matrix((np.ones(rs.size), (rs, np.arange(rs.size))), (n, rs.size)) @ edges
+    can_leave = reaching(union[:, :n], np.asarray(union[:, n].todense()).ravel() > 0)
+    assert can_leave.sum() > n // 2
+    assert np.array_equal(choice >= 0, can_leave)
+    placed = np.flatnonzero(choice >= 0)
+    assert np.all(rs[choice[placed]] == placed)
+    # the chosen rows alone keep a path out from every placed state
+    chosen = edges[np.where(choice >= 0, choice, np.searchsorted(rs, np.arange(n)))]
+    leaves = reaching(chosen[:, :n], np.asarray(chosen[:, n].todense()).ravel() > 0)
+    assert np.array_equal(leaves, can_leave)
+
+
+def test_surest_exit_start_prefers_the_sure_step_to_a_creeping_one():
+    # a corridor 0..9: per state a row that creeps (1e-9 on, the rest stays) and one that
+    # jumps (0.5 on, 0.5 back); the last state's rows leave
+    from planner.imdp.stay import shortest_stay_choice, surest_exit_start
+
+    n = 10
+    rows, cols, vals = [], [], []
+    for s in range(n):
+        on = s + 1
+        rows += [2 * s, 2 * s, 2 * s + 1, 2 * s + 1]
+        cols += [on, s, on, max(s - 1, 0)]
+        vals += [1e-9, 1 - 1e-9, 0.5, 0.5]
+    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(2 * n, n + 1))
+    rs = np.repeat(np.arange(n), 2)
+    choice = surest_exit_start(matrix, rs)
+    assert np.array_equal(choice, 2 * np.arange(n) + 1)
+    creeping = 2 * np.arange(n)
+    assert _stays(matrix, rs, creeping).max() > 1e9
+    assert _stays(matrix, rs, choice).max() < 200
+    # policy iteration from the creeping rows finds the jumping ones as well
+    assert np.array_equal(shortest_stay_choice(matrix, rs, creeping), choice)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_shortest_stay_choice_reaches_the_enumerated_minimum(seed):
+    import itertools
+
+    from planner.imdp.stay import shortest_stay_choice, surest_exit_start
+
+    rng = np.random.default_rng(100 + seed)
+    n = 6
+    matrix, rs = _candidates(rng, n, 0)
+    start = surest_exit_start(matrix, rs)
+    assert np.all(start >= 0)
+    per_state = [np.flatnonzero(rs == s) for s in range(n)]
+    best = np.full(n, np.inf)
+    for combo in itertools.product(*per_state):
+        best = np.minimum(best, _stays(matrix, rs, np.array(combo)))
+    choice = shortest_stay_choice(matrix, rs, start)
+    got = _stays(matrix, rs, choice)
+    assert np.all(got <= _stays(matrix, rs, start) * (1 + 1e-12))
+    assert np.allclose(got, best, rtol=1e-8)
+    # a limit the start already meets keeps the start
+    assert np.array_equal(
+        shortest_stay_choice(matrix, rs, start, limit=1.001 * _stays(matrix, rs, start).max()),
+        start,
+    )
