@@ -1,0 +1,44 @@
+"""Robust strategy iteration (planner.imdp.strategy)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.imdp import IMDP
+from planner.imdp.strategy import strategy_iteration
+
+
+def _creep_or_jump() -> IMDP:
+    """State 0 with two rows tied at ``v = 0.5`` within the tie slack: action 0 creeps
+    (stays with ``1 - 1e-9``, the rest to the target 1 and the sink 2, worth 0.499),
+    action 1 jumps (target or sink with 0.5 each, worth 0.5). Point intervals."""
+    s = [0, 0, 0, 0, 0, 1, 2]
+    a = [0, 0, 0, 1, 1, 0, 0]
+    t = [0, 1, 2, 1, 2, 1, 2]
+    p = [1 - 1e-9, 0.499e-9, 0.501e-9, 0.5, 0.5, 1.0, 1.0]
+    return IMDP(3, s, a, t, p, p, labels=[(), ("goal",), ()])
+
+
+def test_first_strategy_takes_the_sure_exit_among_tied_rows():
+    # both rows of state 0 are optimal for v within the slack and both move into settled
+    # states, the creeping one only by 1e-9 a step, most of it into the sink: its value is
+    # 0.499. The first evaluation is already the jump's 0.5.
+    m = _creep_or_jump()
+    free_rows = np.flatnonzero(m.row_state == 0)
+    v = np.array([0.5, 1.0, 0.0])
+    fixed = np.array([0.0, 1.0, 0.0])
+    x, _, rounds = strategy_iteration(m, free_rows, v, fixed, True, 1e-8, max_rounds=1)
+    assert rounds == 1
+    assert x[0] == pytest.approx(0.5, abs=1e-12)
+
+
+@pytest.mark.parametrize("start", [0.0, 0.499, 0.5])
+def test_strategy_iteration_ends_at_the_jump(start):
+    m = _creep_or_jump()
+    free_rows = np.flatnonzero(m.row_state == 0)
+    v = np.array([start, 1.0, 0.0])
+    fixed = np.array([0.0, 1.0, 0.0])
+    x, sigma, _ = strategy_iteration(m, free_rows, v, fixed, True, 1e-8)
+    assert sigma is not None and m.row_action[sigma[0]] == 1
+    assert x[0] == pytest.approx(0.5, abs=1e-12)
