@@ -20,6 +20,7 @@ import numpy as np
 
 from hopper_sim.navigation.events import RunEnd
 from hopper_sim.viz.recording import RecordingError
+from hopper_sim.viz.rrd_frames import check_rrd
 
 if TYPE_CHECKING:
     from hopper_sim.viz.figures import Route
@@ -44,6 +45,7 @@ def _read(path: Path) -> tuple[list, Any, bool]:
 
     if not path.is_file():
         raise RecordingError(f"no recording at {path}: file not found")
+    check_rrd(path)  # rerun's decoder aborts the process on some corrupt payloads
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # rerun warns about footer-less (legacy) files

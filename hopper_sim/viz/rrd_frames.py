@@ -1,0 +1,212 @@
+"""The framing of a rerun ``.rrd`` file, checked before rerun decodes it.
+
+rerun's decoder takes the whole process down on some corrupt files: an Arrow IPC message
+whose buffer lengths point past its body panics inside ``arrow_ipc::reader`` and the panic
+aborts (rerun-sdk 0.41, found by ``tests/test_reader_fuzz.py``). A reader of files from
+elsewhere must fail with an error instead, so :func:`check_rrd` walks the file first and
+reads every Arrow payload with pyarrow's validating IPC reader:
+
+* header: ``RRF2``, four version bytes, four option bytes;
+* messages: ``kind`` (u64: 1 store info, 2 Arrow message, 3 blueprint activation, 0 end of
+  stream, whose body is the footer manifest), ``length`` (u64), then ``length`` bytes of
+  protobuf, every message within the file;
+* Arrow messages (protobuf fields 2 compression, 3 uncompressed size, 4 encoding, 5
+  payload): the payload LZ4-block decompressed to exactly its declared size (at most
+  :data:`MAX_RATIO` times the compressed size) and read as an Arrow IPC stream, fully
+  validated.
+
+The checks follow the file format of the pinned rerun (``rerun-sdk>=0.41,<0.42``); a file
+that passes is decoded by rerun as before.
+"""
+
+from __future__ import annotations
+
+import mmap
+import struct
+from pathlib import Path
+
+from hopper_sim.viz.recording import RecordingError
+
+MAGIC = b"RRF2"
+_HEADER = 12
+_FRAME = struct.Struct("<QQ")
+_KINDS = {0: "end of stream", 1: "store info", 2: "Arrow message", 3: "blueprint activation"}
+_ARROW_MSG = 2
+_END = 0
+_LZ4 = 2
+_NO_COMPRESSION = (0, 1)
+_ARROW_IPC = 1
+MAX_RATIO = 255
+"""LZ4's largest compression ratio: a declared uncompressed size beyond it is corrupt."""
+
+
+def check_rrd(path: Path) -> None:
+    """Raise :class:`RecordingError` (with the byte offset) if the framing of ``path`` or
+    one of its Arrow payloads is corrupt; return quietly otherwise."""
+    with path.open("rb") as f:
+        if path.stat().st_size < _HEADER or f.read(4) != MAGIC:
+            raise RecordingError(f"{path} is not a readable rerun recording: no RRF2 header")
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            _check_messages(path, data)
+
+
+def _check_messages(path: Path, data: mmap.mmap) -> None:
+    pos, index = _HEADER, 0
+    while pos < len(data):
+        if pos + _FRAME.size > len(data):
+            raise RecordingError(f"{path}: truncated message header at byte {pos}")
+        kind, length = _FRAME.unpack_from(data, pos)
+        start = pos + _FRAME.size
+        if kind not in _KINDS:
+            raise RecordingError(f"{path}: unknown message kind {kind} at byte {pos}")
+        if length > len(data) - start:
+            raise RecordingError(
+                f"{path}: message {index} at byte {pos} declares {length} bytes, "
+                f"{len(data) - start} remain (truncated or corrupt)"
+            )
+        body = data[start : start + length]
+        if kind == _ARROW_MSG:
+            try:
+                _check_arrow_msg(body)
+            except ValueError as err:
+                raise RecordingError(
+                    f"{path}: Arrow message {index} at byte {pos} is corrupt: {err}"
+                ) from None
+        if kind == _END:
+            return  # the rest is the footer manifest and its trailer
+        pos, index = start + length, index + 1
+
+
+def _check_arrow_msg(body: bytes) -> None:
+    import pyarrow as pa
+    import pyarrow.ipc as ipc
+
+    fields = _fields(body)
+    compression = fields.get(2, 0)
+    size = fields.get(3, 0)
+    encoding = fields.get(4, 0)
+    payload = fields.get(5, b"")
+    if not isinstance(payload, bytes) or not all(
+        isinstance(v, int) for v in (compression, size, encoding)
+    ):
+        raise ValueError("fields of the wrong type")
+    if encoding != _ARROW_IPC:
+        raise ValueError(f"encoding {encoding} is not Arrow IPC")
+    if compression == _LZ4:
+        if size > MAX_RATIO * len(payload) + 16:
+            raise ValueError(f"declares {size} bytes from {len(payload)} compressed")
+        try:
+            raw = pa.decompress(payload, decompressed_size=size, codec="lz4_raw")
+        except (pa.ArrowException, ValueError, OSError) as err:
+            raise ValueError(f"LZ4 payload: {err}") from None
+        if raw.size != size:
+            raise ValueError(f"decompressed to {raw.size} bytes, not {size}")
+    elif compression in _NO_COMPRESSION:
+        raw = pa.py_buffer(payload)
+    else:
+        raise ValueError(f"unknown compression {compression}")
+    try:
+        for message in ipc.MessageReader.open_stream(raw):
+            _check_buffers(message.metadata.to_pybytes(), message.body.size if message.body else 0)
+        ipc.open_stream(raw).read_all().validate(full=True)
+    except (pa.ArrowException, ValueError, OSError, struct.error) as err:
+        raise ValueError(f"Arrow IPC payload: {err}") from None
+
+
+_RECORD_BATCH, _DICTIONARY_BATCH = 3, 4
+"""``MessageHeader`` union types of Arrow's ``Message.fbs``."""
+
+
+def _check_buffers(meta: bytes, body_size: int) -> None:
+    """Every buffer ``(offset, length)`` of a record or dictionary batch message lies in
+    its body, and every field node has ``0 <= null_count <= length``. pyarrow does not
+    look at the buffers an array does not need (the validity buffer of an array without
+    nulls); Arrow's Rust reader slices them all and panics on one past the body. Reads
+    the flatbuffer ``Message`` table (``header_type`` field 1, ``header`` field 2), the
+    ``RecordBatch`` (``nodes`` field 1, ``buffers`` field 2), or a ``DictionaryBatch``'s
+    ``data`` (field 1)."""
+    root = _u32(meta, 0)
+    kind = _field(meta, root, 1)
+    header = _field(meta, root, 2)
+    if kind is None or header is None:
+        return
+    kind = meta[kind]
+    batch = header + _u32(meta, header)
+    if kind == _DICTIONARY_BATCH:
+        data = _field(meta, batch, 1)
+        if data is None:
+            return
+        batch = data + _u32(meta, data)
+    elif kind != _RECORD_BATCH:
+        return
+    for number, check in (
+        (1, _node_ok),
+        (2, lambda a, b: a >= 0 and b >= 0 and a + b <= body_size),
+    ):
+        at = _field(meta, batch, number)
+        if at is None:
+            continue
+        vec = at + _u32(meta, at)
+        for k in range(_u32(meta, vec)):
+            a, b = struct.unpack_from("<qq", meta, vec + 4 + 16 * k)
+            if not check(a, b):
+                what = "field node" if number == 1 else "buffer"
+                raise ValueError(f"{what} {k} ({a}, {b}) out of range (body {body_size} bytes)")
+
+
+def _node_ok(length: int, null_count: int) -> bool:
+    return 0 <= null_count <= length
+
+
+def _u32(buf: bytes, pos: int) -> int:
+    return struct.unpack_from("<I", buf, pos)[0]
+
+
+def _field(buf: bytes, table: int, number: int) -> int | None:
+    """Position of field ``number`` of the flatbuffer table at ``table`` (``None`` when
+    absent): the table starts with the signed offset back to its vtable, whose entries
+    after two ``u16`` sizes are the fields' offsets in the table."""
+    vtable = table - struct.unpack_from("<i", buf, table)[0]
+    size = struct.unpack_from("<H", buf, vtable)[0]
+    entry = 4 + 2 * number
+    if entry + 2 > size:
+        return None
+    off = struct.unpack_from("<H", buf, vtable + entry)[0]
+    return table + off if off else None
+
+
+def _fields(body: bytes) -> dict[int, int | bytes]:
+    """The top-level fields of a protobuf message, by number (the last one wins; varints
+    and length-delimited values, fixed-width ones skipped)."""
+    out: dict[int, int | bytes] = {}
+    pos = 0
+    while pos < len(body):
+        key, pos = _varint(body, pos)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            out[number], pos = _varint(body, pos)
+        elif wire == 2:
+            length, pos = _varint(body, pos)
+            if length > len(body) - pos:
+                raise ValueError(f"field {number} runs past the message")
+            out[number], pos = body[pos : pos + length], pos + length
+        elif wire in (1, 5):
+            pos += 8 if wire == 1 else 4
+        else:
+            raise ValueError(f"protobuf wire type {wire}")
+    if pos > len(body):
+        raise ValueError("a field runs past the message")
+    return out
+
+
+def _varint(body: bytes, pos: int) -> tuple[int, int]:
+    value = shift = 0
+    while True:
+        if pos >= len(body) or shift > 63:
+            raise ValueError("unterminated varint")
+        byte = body[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if not byte & 0x80:
+            return value, pos
