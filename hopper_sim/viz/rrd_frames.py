@@ -30,7 +30,8 @@ from hopper_sim.viz.recording import RecordingError
 MAGIC = b"RRF2"
 _HEADER = 12
 _FRAME = struct.Struct("<QQ")
-_KINDS = {0: "end of stream", 1: "store info", 2: "Arrow message", 3: "blueprint activation"}
+_KINDS = frozenset({0, 1, 2, 3})
+"""End of stream, store info, Arrow message, blueprint activation."""
 _ARROW_MSG = 2
 _END = 0
 _LZ4 = 2

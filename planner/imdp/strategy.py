@@ -89,7 +89,7 @@ def _surest_start(
     tol: float,
 ) -> np.ndarray:
     """The first strategy of :func:`strategy_iteration`: among the rows optimal for ``v``
-    (within :func:`tie_slack`), the greedy surest exit
+    (:func:`optimal_rows`, as in :func:`strategy_rows`), the greedy surest exit
     (:func:`planner.imdp.stay.surest_exit_start`) of the adversary's chain at ``v``
     (``matrix``, one distribution per free row), mass into states of value 0 counting as
     staying; ``sigma`` (the robust-attractor rows of :func:`strategy_rows`) where no such
@@ -97,8 +97,7 @@ def _surest_start(
     and that lose their value on the way: on the 100 x 100 benchmark grid the first
     strategy was then worth about 0 where ``v`` was about 1. Only the number of improvement
     rounds depends on this choice; every round is evaluated exactly."""
-    best = np.maximum.reduceat(q, seg)[run_ids(rs)]
-    near = np.flatnonzero(q >= best - tie_slack(tol))
+    near = optimal_rows(q, seg, rs, True, tol)
     chains = sp.csr_matrix(matrix)[near].tocoo()
     dead = v[chains.col] <= 0.0
     cols = np.where(dead, rs[near][chains.row], chains.col)
@@ -107,9 +106,13 @@ def _surest_start(
     return free_rows[near[pick]]
 
 
-def tie_slack(tol: float) -> float:
-    """Row values within this of the best count as optimal (:func:`strategy_rows`)."""
-    return max(10 * tol, 1e-12)
+def optimal_rows(
+    q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool, tol: float
+) -> np.ndarray:
+    """Indices of the rows (values ``q``, states ``rs`` in runs starting at ``seg``)
+    within ``max(10 tol, 1e-12)`` of their state's best: the rows that count as optimal."""
+    best = (np.maximum if maximize else np.minimum).reduceat(q, seg)[run_ids(rs)]
+    return np.flatnonzero(np.abs(q - best) <= max(10 * tol, 1e-12))
 
 
 def strategy_actions(
@@ -152,11 +155,7 @@ def strategy_rows(
     if free_rows.size == 0:
         return choice
     rs = m.row_state[free_rows]
-    best = (np.maximum if maximize else np.minimum).reduceat(q_free, seg)
-    best_of = np.zeros(n)
-    best_of[seg_states] = best
-    slack = tie_slack(tol)
-    opt_local = np.flatnonzero(np.abs(q_free - best_of[rs]) <= slack)
+    opt_local = optimal_rows(q_free, seg, rs, maximize, tol)
     first = opt_local[first_of_runs(rs[opt_local])]
     choice[rs[first]] = free_rows[first]
     if reach_max:

@@ -19,6 +19,7 @@ import pytest
 
 from hopper_sim.viz.recording import RecordingError, RerunRecorder
 from hopper_sim.viz.recording_reader import summarize_recording
+from hopper_sim.viz.rrd_frames import _varint as _varint_at
 from hopper_sim.viz.rrd_frames import check_rrd
 from planner.scenario import load_scenario
 from tests.hopper_sim.synthetic_runs import feed, run_events
@@ -55,25 +56,14 @@ def _varint(value: int) -> bytes:
             return bytes(out)
 
 
-def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte = buf[pos]
-        pos += 1
-        value |= (byte & 0x7F) << shift
-        shift += 7
-        if not byte & 0x80:
-            return value, pos
-
-
 def _proto(body: bytes) -> list[tuple[int, int, int | bytes]]:
     out, pos = [], 0
     while pos < len(body):
-        key, pos = _read_varint(body, pos)
+        key, pos = _varint_at(body, pos)
         if key & 7 == 0:
-            value, pos = _read_varint(body, pos)
+            value, pos = _varint_at(body, pos)
         else:
-            n, pos = _read_varint(body, pos)
+            n, pos = _varint_at(body, pos)
             value, pos = body[pos : pos + n], pos + n
         out.append((key >> 3, key & 7, value))
     return out
