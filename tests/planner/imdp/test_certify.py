@@ -141,6 +141,23 @@ def test_passes_from_above_on_a_thread_give_the_sequential_result(monkeypatch):
         np.testing.assert_array_equal(a.upper, b.upper)
 
 
+@pytest.mark.parametrize("per_round", [1, 2, 3])
+def test_interval_rounds_sweep_from_below_as_often_as_set(monkeypatch, per_round):
+    interval = importlib.import_module("planner.imdp.interval")
+    monkeypatch.setattr(interval, "LOWER_SWEEPS", per_round)
+    m = random_imdp(np.random.default_rng(2), 60, 3, 5)
+    seen: list[int] = []
+    alg = ValueIteration(callback=lambda it, res: seen.append(it))
+    sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))), alg)
+    ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
+    assert sol.converged and sol.upper_sweeps > 10
+    # every sweep from below is reported once, in order; each round (one pass from above)
+    # made ``per_round`` of them, and the closing round one more
+    assert seen == list(range(1, sol.iterations + 1))
+    assert sol.iterations == per_round * sol.upper_sweeps + 1
+    assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+
+
 def _child_solve(queue) -> None:
     queue.put(_interval_solution(1).lower.tolist())
 
