@@ -65,6 +65,20 @@ Where the values from below are the slower side, fewer rounds close the bracket:
 uncertified, 0.94-1.15x; the random 100k-state model, where the bound from above is the
 slower side, 0.98-1.03x)."""
 
+TRACK_FRACTION = 1e-4
+"""The rounds' passes from above evaluate only the states with a successor whose upper
+value fell by more than ``tolerance * TRACK_FRACTION`` since their last evaluation, once
+a pass has moved at most ``kernels.sweeps.TRACK_START`` of the free states
+(:meth:`planner.imdp.kernels.ReachSweeper.track_changes`; a skipped update leaves ``U``
+where it was, an upper bound still). On the 100 x 100 benchmark grid (seed 0) the states
+due fall from 6,862 of the 9,908 free states at round 8 to 1,501 at round 32 and 358 at
+round 112, and the certified solve of seeds 0-5 is 0.99-1.29x faster (least of 3 runs
+each, A/B in one process) with the same sweeps, passes and lower bounds and upper bounds
+within 1e-10 of the untracked ones; the random 100k-state model never starts tracking
+(about 64,600 of its 64,611 free states move in each pass). The sweeps from below are not tracked: their values keep rising at 4,000-9,800
+states per sweep until late, and flagging the predecessors of each cost more than the
+skips saved."""
+
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
 
@@ -109,6 +123,8 @@ class _IntervalIteration:
         self.bounds.deflate(self.u)
         # ``u`` only ever decreases below (passes, deflation, repairs keep a minimum)
         self.cache = sweeper.upper_cache()
+        sweeper.track_changes(alg.tolerance * TRACK_FRACTION)
+        self._members = self.bounds.members
         self.residual = np.inf
         self.it = self.sweeps = self.passes = self.evaluations = self.repairs = self.stalls = 0
         self.global_repair = False
@@ -119,8 +135,11 @@ class _IntervalIteration:
         return float(np.max(self.u[st] - self.v[st]))
 
     def _from_above(self) -> None:
-        self.sweeper.upper_pass(self.u, cache=self.cache)
-        self.bounds.deflate(self.u)
+        self.sweeper.upper_pass(self.u, cache=self.cache, track=True)
+        if self._members.size:
+            before = self.u.copy()
+            self.bounds.deflate(self.u)
+            self.sweeper.moved_above(before, self.u)
 
     def round(self) -> float:
         """One round: sweeps and collapses from below, pass and deflate from above; the
@@ -190,6 +209,7 @@ class _IntervalIteration:
             self.passes += k
             if ok:
                 self.u = np.minimum(u, cand)
+                self.sweeper.moved_above(u, self.u)
 
     def run(self) -> bool:
         """Rounds until the bracket closes (``True``) or stalls for good (``False``)."""

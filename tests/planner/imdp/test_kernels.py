@@ -5,7 +5,7 @@ import pytest
 
 from planner.imdp import IMDP
 from planner.imdp.graph import _attractor, forced_into
-from planner.imdp.kernels import ReachSweeper
+from planner.imdp.kernels import ReachSweeper, sweeps
 from tests.planner.imdp.reference import random_imdp, ref_expectation, rows_of
 
 
@@ -130,3 +130,83 @@ def test_chain_reaching_matches_a_breadth_first_search_on_the_transpose(seed):
         want[breadth_first_order(rev, s, directed=True, return_predecessors=False)] = True
     np.testing.assert_array_equal(got, want)
     assert got[seeds].all() and 0 < got.sum() < n
+
+
+def _upper_start(m: IMDP) -> tuple[np.ndarray, np.ndarray]:
+    """Free rows (not at the goal or the absorbing sink 0) and ``U = 1`` there, the goal at
+    1 and the sink at 0."""
+    goal = m.states_labelled("goal")
+    settled = goal.copy()
+    settled[0] = True
+    u = np.where(goal, 1.0, 0.0)
+    u[~settled] = 1.0
+    return np.flatnonzero(~settled[m.row_state]), u
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_tracked_passes_from_above_equal_untracked_ones(monkeypatch, seed):
+    # with every decrease flagged (mark_above = 0), a skipped state is one whose inputs
+    # did not change since its last evaluation: the same values, fewer evaluations
+    monkeypatch.setattr(sweeps, "TRACK_START", 1.0)  # track from the first pass
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=60, n_actions=4, max_succ=6)
+    free_rows, u = _upper_start(m)
+    key = rng.random(m.n_states)
+    plain = ReachSweeper(m, free_rows, key, True, True)
+    tracked = ReachSweeper(m, free_rows, key, True, True)
+    tracked.track_changes(0.0)
+    cache_plain, cache_tracked = plain.upper_cache(), tracked.upper_cache()
+    a, b = u.copy(), u.copy()
+    evaluated = []
+    for _ in range(400):
+        dec, _ = plain.upper_pass(a, cache=cache_plain)
+        before = cache_tracked.copy()
+        tracked.upper_pass(b, cache=cache_tracked, track=True)
+        evaluated.append(int((cache_tracked != before).sum()))
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-15)
+        if dec == 0.0:
+            break
+    assert dec == 0.0 and a.min() < 1.0  # converged, and the values moved
+    before = cache_tracked.copy()
+    tracked.upper_pass(b, cache=cache_tracked, track=True)
+    assert np.array_equal(cache_tracked, before)  # nothing moved, nothing is due
+    assert evaluated[0] > 0 and min(evaluated) < evaluated[0]
+
+
+def test_tracking_waits_until_few_states_move(monkeypatch):
+    # until a pass moves at most TRACK_START of the free states, every state is evaluated
+    monkeypatch.setattr(sweeps, "TRACK_START", 0.0)  # only after a pass that moved none
+    m = random_imdp(np.random.default_rng(5), n_states=60, n_actions=4, max_succ=6)
+    free_rows, u = _upper_start(m)
+    sw = ReachSweeper(m, free_rows, np.zeros(m.n_states), True, True)
+    ref = ReachSweeper(m, free_rows, np.zeros(m.n_states), True, True)
+    sw.track_changes(0.0)
+    a, b = u.copy(), u.copy()
+    cache_a, cache_b = sw.upper_cache(), ref.upper_cache()
+    for _ in range(400):
+        seen_a, seen_b = cache_a.copy(), cache_b.copy()
+        sw.upper_pass(a, cache=cache_a, track=True)
+        dec, _ = ref.upper_pass(b, cache=cache_b)
+        np.testing.assert_array_equal(a, b)
+        # the same rows evaluated (a skipped state would keep its cached rows)
+        np.testing.assert_array_equal(cache_a != seen_a, cache_b != seen_b)
+        if dec == 0.0:
+            break
+    assert dec == 0.0
+    # that pass moved no state: tracking starts with every state due, then none is
+    sw.upper_pass(a, cache=cache_a, track=True)
+    ref.upper_pass(b, cache=cache_b)
+    free = np.unique(m.row_state[free_rows])
+    t = free[np.argmax(a[free])]  # lower the highest free value: its predecessors follow
+    before = a.copy()
+    a[t] *= 0.5
+    lowered, b = a.copy(), a.copy()
+    sw.upper_pass(a, cache=cache_a, track=True)
+    np.testing.assert_array_equal(a, lowered)  # not reported: nothing is due
+    ref.upper_pass(b, cache=cache_b)
+    assert (b < lowered).sum() > 0  # a full pass carries the drop to the predecessors
+    sw.moved_above(before, lowered)
+    sw.upper_pass(a, cache=cache_a, track=True)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="cannot repair"):
+        sw.upper_pass(a, raise_violations=True, track=True)
