@@ -81,7 +81,7 @@ TRACK_START = 0.25
 """Tracked passes from above skip states once a pass has moved at most this fraction of
 the free states (:meth:`ReachSweeper.track_changes`). On the random 100k-state benchmark
 model nearly every state moves in each of its 27 passes, and tracking from the start made
-the certified solve 1.5-1.7x slower."""
+the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
 _NO_INDEX = np.empty(0, dtype=np.int64)
