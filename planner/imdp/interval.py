@@ -4,9 +4,11 @@ minimising adversary (:class:`planner.imdp.certify.EndComponentBounds`).
 Each round: ``LOWER_SWEEPS`` Gauss-Seidel sweeps from below (the first of all rows every
 ``FULL_EVERY``-th round, the others of the best rows), each followed by the lower bound
 raised to the best exit on the traversable end components, and meanwhile, on a second
-thread, a Gauss-Seidel pass ``U = min(U, T(U))`` from above (all rows) and ``U`` lowered to
-the best exit on every end component. From ``U = 1`` both sides stay sound bounds in every
-round.
+thread, a Gauss-Seidel pass ``U = min(U, T(U))`` from above and ``U`` lowered to the best
+exit on every end component. From ``U = 1`` both sides stay sound bounds in every round.
+The pass from above evaluates every state until a pass moves few of them, then only the
+states with a successor whose upper value fell since their last evaluation
+(``TRACK_FRACTION``): a skipped update leaves an upper bound where it was.
 Every ``_II_WINDOW`` rounds the states still moving from below, if at most
 ``RAISE_FRACTION`` of the free states, are solved by strategy iteration with the others
 held at ``L`` (sound, as in :mod:`planner.imdp.reachability`).
@@ -75,9 +77,9 @@ due fall from 6,862 of the 9,908 free states at round 8 to 1,501 at round 32 and
 round 112, and the certified solve of seeds 0-5 is 0.99-1.29x faster (least of 3 runs
 each, A/B in one process) with the same sweeps, passes and lower bounds and upper bounds
 within 1e-10 of the untracked ones; the random 100k-state model never starts tracking
-(about 64,600 of its 64,611 free states move in each pass). The sweeps from below are not tracked: their values keep rising at 4,000-9,800
-states per sweep until late, and flagging the predecessors of each cost more than the
-skips saved."""
+(about 64,600 of its 64,611 free states move in each pass). The sweeps from below are
+not tracked: their values keep rising at 4,000-9,800 states per sweep until late, and
+flagging the predecessors of each cost more than the skips saved."""
 
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
