@@ -102,9 +102,6 @@ class EndComponentBounds:
         row_mask[sweeper.rows] = True
         comp, kept = end_component_labels(m, row_mask, free, Adversary.PESSIMISTIC)
         members = np.flatnonzero(comp >= 0)
-        self.members = members
-        """The states of the components (where :meth:`deflate` and :meth:`collapse` may
-        move values)."""
         labels, label_of = np.unique(comp[members], return_inverse=True)
         n_comp = labels.size
         self.n_components = int(n_comp)

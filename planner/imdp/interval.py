@@ -126,7 +126,6 @@ class _IntervalIteration:
         # ``u`` only ever decreases below (passes, deflation, repairs keep a minimum)
         self.cache = sweeper.upper_cache()
         sweeper.track_changes(alg.tolerance * TRACK_FRACTION)
-        self._members = self.bounds.members
         self.residual = np.inf
         self.it = self.sweeps = self.passes = self.evaluations = self.repairs = self.stalls = 0
         self.global_repair = False
@@ -138,7 +137,7 @@ class _IntervalIteration:
 
     def _from_above(self) -> None:
         self.sweeper.upper_pass(self.u, cache=self.cache, track=True)
-        if self._members.size:
+        if self.bounds.n_components:
             before = self.u.copy()
             self.bounds.deflate(self.u)
             self.sweeper.moved_above(before, self.u)

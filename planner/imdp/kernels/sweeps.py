@@ -268,9 +268,7 @@ class ReachSweeper:
         self.best_row = self.state_rows[:-1].copy()
         self._model = m
         self._tracking: tuple | None = None
-        self._track_above = 0.0
         self._tracked = False
-        self._moved = self.states.size
         self.maximize = bool(maximize)
         self.adversary_minimizes = bool(adversary_minimizes)
         self._one_row = np.arange(self.states.size + 1, dtype=np.int64)
@@ -334,7 +332,6 @@ class ReachSweeper:
         ptr, inc_row, _, _ = self._model.incoming()
         due = np.ones(self._model.n_states, dtype=np.bool_)
         self._tracking = (due, ptr, inc_row, self._model.row_state, float(mark_above))
-        self._track_above = float(mark_above)
         self._tracked = False
         self._moved = self.states.size
 
@@ -374,7 +371,9 @@ class ReachSweeper:
         if track and self._tracked:
             tracking = self._tracking
         else:
-            tracking = (_NOT_TRACKED, _NO_INDEX, _NO_INDEX, _NO_INDEX, self._track_above)
+            # untracked; a tracked call still counts the states moved by more than its bound
+            above = self._tracking[4] if track else 0.0
+            tracking = (_NOT_TRACKED, _NO_INDEX, _NO_INDEX, _NO_INDEX, above)
         dec, bad, moved = upper_sweep(
             self.states,
             self.state_rows,
