@@ -24,6 +24,7 @@ import scipy.sparse as sp
 from planner.errors import SpecificationError
 from planner.imdp.kernels import (
     backward_distance,
+    forward_reach,
     maximal_end_components_kernel,
     prune_kernel,
     robust_attractor,
@@ -167,6 +168,26 @@ def possible_reach(
     ptr, inc_row, _, inc_upper = model.incoming()
     dist = backward_distance(target, rows, model.row_state, ptr, inc_row, inc_upper)
     return dist < np.inf
+
+
+def recurrence_candidates(
+    model: IMDP, good: np.ndarray, states: np.ndarray, rows: np.ndarray | None = None
+) -> np.ndarray:
+    """The ``states`` reachable from a ``good`` one and able to reach one (the ``good``
+    states among ``states`` included) along ``upper > 0`` entries of ``rows`` that stay
+    among ``states``: two breadth-first searches, ``O(entries)``. An end component inside
+    ``states`` that contains a ``good`` state is strongly connected, so it lies within
+    them: the end components that must visit ``good`` can be searched for there alone."""
+    rows = _all_rows(model, rows)
+    states = np.asarray(states, dtype=bool)
+    rows = rows & states[model.row_state]
+    src = np.asarray(good, dtype=bool) & states
+    ptr, inc_row, _, inc_upper = model.incoming()
+    back = backward_distance(src, rows, model.row_state, ptr, inc_row, inc_upper) < np.inf
+    fwd = forward_reach(
+        src, rows, model.state_ptr, model.row_ptr, model.successor, model.upper, states
+    )
+    return back & fwd
 
 
 def robust_positive_reach(
@@ -365,11 +386,12 @@ def accepting_end_components(
     ``good`` infinitely often with probability 1 under *every* adversary. (An SCC held
     together by edges with ``lower == 0`` does not qualify when the adversary can cut the
     way to ``good``.) Computed by alternating :func:`robust_buchi_region` with the MEC
-    decomposition until each component is its own Büchi region.
+    decomposition until each component is its own Büchi region, from the states that avoid
+    ``bad`` and lie between ``good`` states (:func:`recurrence_candidates`).
     """
     rows = _all_rows(model, rows)
     good = np.asarray(good, dtype=bool)
-    start = ~np.asarray(bad, dtype=bool)
+    start = recurrence_candidates(model, good, ~np.asarray(bad, dtype=bool), rows)
     out: list[EndComponent] = []
     work = [start]
     while work:
@@ -394,7 +416,8 @@ def optimistic_accepting_end_components(
     bad: np.ndarray,
     rows: np.ndarray | None = None,
 ) -> list[EndComponent]:
-    """End components (cooperative adversary) that avoid ``bad`` and contain a ``good`` state."""
+    """End components (cooperative adversary) that avoid ``bad`` and contain a ``good``
+    state (searched for among :func:`recurrence_candidates`)."""
     comp, kept = _optimistic_accepting_labels(model, good, bad, rows)
     return components_from_labels(model, comp, kept)
 
@@ -411,10 +434,9 @@ def optimistic_accepting_states(
 
 
 def _optimistic_accepting_labels(model, good, bad, rows):
-    comp, kept = end_component_labels(
-        model, rows=rows, states=~np.asarray(bad, dtype=bool), mode=Adversary.OPTIMISTIC
-    )
     good = np.asarray(good, dtype=bool)
+    states = recurrence_candidates(model, good, ~np.asarray(bad, dtype=bool), rows)
+    comp, kept = end_component_labels(model, rows=rows, states=states, mode=Adversary.OPTIMISTIC)
     accepted = np.unique(comp[good & (comp >= 0)])
     comp = np.where(np.isin(comp, accepted), comp, -1)
     return comp, kept & (comp[model.row_state] >= 0)

@@ -9,6 +9,7 @@ from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     backward_distance,
     counting_order,
+    forward_reach,
     incoming_index,
     prune_kernel,
     robust_attractor,
@@ -24,6 +25,7 @@ __all__ = [
     "chain_residual",
     "component_exit_bound",
     "counting_order",
+    "forward_reach",
     "gather_rows",
     "gauss_seidel_sweep",
     "incoming_index",

@@ -1,6 +1,6 @@
 """Graph searches over the rows of an interval MDP, compiled: the robust attractor, the
-rows that stay in a set, breadth-first distances, the pruning cascade of removed states, and
-a counting sort."""
+rows that stay in a set, breadth-first distances, forward reachability, the pruning cascade
+of removed states, and a counting sort."""
 
 from __future__ import annotations
 
@@ -144,6 +144,30 @@ def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper)
                 queue[tail] = s
                 tail += 1
     return dist
+
+
+@numba.njit(cache=True, nogil=True)
+def forward_reach(sources, row_mask, state_ptr, row_ptr, successor, upper, allowed):
+    """The ``allowed`` states reachable from ``sources & allowed`` along ``upper > 0``
+    entries of the rows in ``row_mask`` of allowed states (breadth-first, a mask)."""
+    seen = sources & allowed
+    queue = np.flatnonzero(seen)
+    tail = queue.size
+    queue = np.concatenate((queue, np.empty(seen.size - tail, dtype=queue.dtype)))
+    head = 0
+    while head < tail:
+        s = queue[head]
+        head += 1
+        for r in range(state_ptr[s], state_ptr[s + 1]):
+            if not row_mask[r]:
+                continue
+            for e in range(row_ptr[r], row_ptr[r + 1]):
+                t = successor[e]
+                if upper[e] > 0.0 and allowed[t] and not seen[t]:
+                    seen[t] = True
+                    queue[tail] = t
+                    tail += 1
+    return seen
 
 
 @numba.njit(cache=True, nogil=True)

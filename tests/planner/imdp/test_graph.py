@@ -3,6 +3,8 @@ import pytest
 
 from planner.errors import SpecificationError
 from planner.imdp import IMDP, graph
+from planner.modes import Adversary
+from tests.planner.imdp.reference import random_imdp
 
 
 def model(n, rows, labels=None):
@@ -122,3 +124,69 @@ def test_graph_argument_errors():
         graph.stays_in(m, np.ones(1, bool)) & graph._all_rows(m, np.ones(3, bool))
     with pytest.raises(SpecificationError, match="action mask"):
         graph.rows_from_actions(m, np.ones((2, 1), bool))
+
+
+def test_recurrence_candidates_are_the_cycles_through_good():
+    # s0 -> s1 (G) -> s2 -> s1; s2 -> s3 (absorbing); s4 -> s1; s5 (bad) -> s1, s1 -b-> s5
+    m = model(
+        6,
+        [
+            (0, 0, [(1, 1, 1)]),
+            (1, 0, [(2, 1, 1)]),
+            (1, 1, [(5, 1, 1)]),
+            (2, 0, [(1, 0, 1), (3, 0, 1)]),
+            (3, 0, [(3, 1, 1)]),
+            (4, 0, [(1, 1, 1)]),
+            (5, 0, [(1, 1, 1)]),
+        ],
+    )
+    allowed = ~mask(6, [5])
+    got = graph.recurrence_candidates(m, mask(6, [1]), allowed)
+    # s0 and s4 only reach s1, s3 is only reached from it, s5 is not allowed
+    assert got.tolist() == [False, True, True, False, False, False]
+    # with s5 allowed and s2 not, the cycle s1 -b-> s5 -> s1 remains
+    assert graph.recurrence_candidates(m, mask(6, [1]), mask(6, [1, 5])).tolist() == [
+        False,
+        True,
+        False,
+        False,
+        False,
+        True,
+    ]
+    # a good state counts itself (a path of no hops), nothing else does here
+    assert graph.recurrence_candidates(m, mask(6, [0]), allowed).tolist() == [True] + [False] * 5
+
+
+def _accepting_unfiltered(m, good, bad):
+    """The robust Büchi / end-component alternation started from every state that avoids
+    ``bad`` (no candidate filter)."""
+    out, work = [], [~bad]
+    while work:
+        t, r = graph.robust_buchi_region(m, good, work.pop())
+        for ec in graph.maximal_end_components(m, rows=r, states=t):
+            ec_rows = np.zeros(m.n_rows, dtype=bool)
+            ec_rows[ec.rows] = True
+            t2, _ = graph.robust_buchi_region(m, good, ec.state_mask(m.n_states), ec_rows)
+            if np.array_equal(t2, ec.state_mask(m.n_states)):
+                out.append(ec)
+            elif t2.any():
+                work.append(t2)
+    return out
+
+
+@pytest.mark.parametrize("zero_lower", [False, True])
+def test_accepting_components_equal_the_unfiltered_search(zero_lower):
+    rng = np.random.default_rng(41 + zero_lower)
+    filtered = 0
+    for _ in range(150):
+        m = random_imdp(rng, int(rng.integers(5, 30)), 3, 4, zero_lower)
+        good = rng.random(m.n_states) < 0.3
+        bad = rng.random(m.n_states) < 0.2
+        filtered += int((~bad & ~graph.recurrence_candidates(m, good, ~bad)).sum())
+        every = graph.maximal_end_components(m, states=~bad, mode=Adversary.OPTIMISTIC)
+        with_good = [ec for ec in every if good[ec.states].any()]
+        found = graph.optimistic_accepting_end_components(m, good, bad)
+        assert as_sets(found, m) == as_sets(with_good, m)
+        found = graph.accepting_end_components(m, good, bad)
+        assert as_sets(found, m) == as_sets(_accepting_unfiltered(m, good, bad), m)
+    assert filtered > 0  # the filter did remove states
