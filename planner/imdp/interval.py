@@ -2,7 +2,8 @@
 minimising adversary (:class:`planner.imdp.certify.EndComponentBounds`).
 
 Each round: ``LOWER_SWEEPS`` Gauss-Seidel sweeps from below (the first of all rows every
-``FULL_EVERY``-th round, the others of the best rows), each followed by the lower bound
+``FULL_EVERY``-th round, skipping the rows whose cached value from above is below the best
+row's, ``PRUNE``; the others of the best rows), each followed by the lower bound
 raised to the best exit on the traversable end components, and meanwhile, on a second
 thread, a Gauss-Seidel pass ``U = min(U, T(U))`` from above and ``U`` lowered to the best
 exit on every end component. From ``U = 1`` both sides stay sound bounds in every round.
@@ -81,6 +82,13 @@ within 1e-10 of the untracked ones; the random 100k-state model never starts tra
 not tracked: their values keep rising at 4,000-9,800 states per sweep until late, and
 flagging the predecessors of each cost more than the skips saved."""
 
+PRUNE = True
+"""The full sweeps from below skip the rows whose value at an upper bound (the row cache of
+the passes from above) is below the best row's value from below: such a row can neither
+beat nor tie it (action elimination; the same values and best rows). Certified solve of
+the 100 x 100 benchmark grid 1.02-1.14x faster on seeds 0-2, 1.01x on seed 3, 1.00-1.07x on
+the random 100k-state model (A/B in one process); its full sweeps take 5-20 % less."""
+
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
 
@@ -153,7 +161,9 @@ class _IntervalIteration:
         above = _pool().submit(self._from_above)
         try:
             for k in range(LOWER_SWEEPS):
-                self.residual = self.sweeper.sweep(self.v, k == 0 and self.it % FULL_EVERY == 1)
+                self.residual = self.sweeper.sweep(
+                    self.v, k == 0 and self.it % FULL_EVERY == 1, self.cache if PRUNE else None
+                )
                 self.bounds.collapse(self.v)
                 self.sweeps += 1
                 if self.alg.callback is not None:

@@ -34,6 +34,7 @@ def gauss_seidel_sweep(
     full,
     maximize,
     adversary_minimizes,
+    bound,
 ) -> float:
     """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
     ``states`` in order, in place; returns ``max_s`` of the change.
@@ -45,10 +46,18 @@ def gauss_seidel_sweep(
     a maximising strategy its update is at most the full one). Iterating from below
     (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
     sound lower bound.
+
+    ``bound`` (full sweeps of a maximising strategy; empty: none): per layout row a value
+    at least the row's value at every ``V`` swept (the row cache of the passes from above,
+    :func:`upper_sweep`, which holds row values at upper bounds). The last best row is
+    evaluated first, and a row whose bound is below the best value found so far is skipped:
+    it can neither beat nor tie it, so values and best rows are those of the full sweep
+    (action elimination).
     """
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     residual = 0.0
+    prune = full and maximize and bound.size > 0
     for k in range(states.size):
         s = states[k]
         if full:
@@ -59,11 +68,24 @@ def gauss_seidel_sweep(
             hi = lo + 1
         best = -np.inf if maximize else np.inf
         arg = lo
-        for r in range(lo, hi):
-            q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
-            if (q > best) if maximize else (q < best):
-                best = q
-                arg = r
+        if prune and hi - lo > 1:
+            # the last best row first; a row whose bound is below the best so far can
+            # neither beat nor tie it
+            arg = best_row[k]
+            best = row_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+            for r in range(lo, hi):
+                if r == arg or bound[r] < best:
+                    continue
+                q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+                if q > best or (q == best and r < arg):
+                    best = q
+                    arg = r
+        else:
+            for r in range(lo, hi):
+                q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+                if (q > best) if maximize else (q < best):
+                    best = q
+                    arg = r
         if full:
             best_row[k] = arg
         old = v[s]
@@ -276,9 +298,11 @@ class ReachSweeper:
         self._light_rows = self.best_row
         self._no_cache = np.empty(0)
 
-    def sweep(self, v: np.ndarray, full: bool = True) -> float:
+    def sweep(self, v: np.ndarray, full: bool = True, bound: np.ndarray | None = None) -> float:
         """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`): all
-        rows (``full``) or the best rows of the last full sweep."""
+        rows (``full``; those whose ``bound``, a per-row upper bound such as the row cache
+        of the passes from above, is below the best found are skipped) or the best rows of
+        the last full sweep."""
         if full or self._light is None:
             residual = gauss_seidel_sweep(
                 self.states,
@@ -294,6 +318,7 @@ class ReachSweeper:
                 True,
                 self.maximize,
                 self.adversary_minimizes,
+                self._no_cache if bound is None else bound,
             )
             if self._light is None or not np.array_equal(self.best_row, self._light_rows):
                 self._light_rows = self.best_row.copy()
@@ -323,6 +348,7 @@ class ReachSweeper:
                 False,
                 self.maximize,
                 self.adversary_minimizes,
+                self._no_cache,
             )
         )
 

@@ -210,3 +210,36 @@ def test_tracking_waits_until_few_states_move(monkeypatch):
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
     with pytest.raises(ValueError, match="cannot repair"):
         sw.upper_pass(a, raise_violations=True, track=True)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_full_sweeps_skip_rows_bounded_below_the_best_and_nothing_else_changes(seed):
+    # the rows' cached values of a lazy pass from above bound them at every lower vector;
+    # a row bounded below the best row found so far can neither beat nor tie it
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=60, n_actions=5, max_succ=6)
+    free_rows, u = _upper_start(m)
+    key = rng.random(m.n_states)
+    plain = ReachSweeper(m, free_rows, key, True, True)
+    pruned = ReachSweeper(m, free_rows, key, True, True)
+    above = ReachSweeper(m, free_rows, key, True, True)
+    cache = above.upper_cache()
+    for _ in range(40):
+        above.upper_pass(u, cache=cache)
+    a = np.where(u == 1.0, u, 0.0)
+    a[plain.states] = 0.0
+    b = a.copy()
+    for _ in range(30):
+        plain.sweep(a, True)
+        pruned.sweep(b, True, bound=cache)
+        np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(pruned.best_row, plain.best_row)
+    # rows were skippable: bounded below their state's value from below
+    assert (cache < a[m.row_state[plain.rows]]).sum() > 0
+    # a bound below every value skips all rows but the last best one
+    pruned.best_row[:] = pruned.state_rows[:-1]
+    low = np.full(cache.size, -1.0)
+    c = a.copy()
+    pruned.sweep(c, True, bound=low)
+    np.testing.assert_array_equal(pruned.best_row, pruned.state_rows[:-1])
+    assert (pruned.best_row != plain.best_row).any()
