@@ -60,7 +60,7 @@ from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
 from planner.imdp.rabin_game import almost_sure_region
-from planner.imdp.solve import Problem, ReachAvoid, Solution, Specification, solve
+from planner.imdp.solve import Problem, ReachAvoid, Solution, Specification, solve, solve_with
 from planner.modes import Adversary
 
 __all__ = ["almost_sure_region", "evaluate_strategy", "rejecting_components", "robust_satisfaction"]
@@ -234,7 +234,8 @@ def robust_satisfaction(
     bad = np.asarray(bad, dtype=bool).reshape(-1, m.n_states)
     rows = None if allowed is None else graph.rows_from_actions(m, allowed)
     win, win_row = almost_sure_region(m, good, bad, rows)
-    reach = solve(Problem(m, Specification(ReachAvoid(win)), allowed), alg)
+    # a state that reaches ``win`` almost surely wins there: ``win`` is closed
+    reach = solve_with(Problem(m, Specification(ReachAvoid(win)), allowed), alg, True)
     # every state with an allowed row plays one (the first, where reachability settled
     # the state without a strategy): a stopped run would lose
     choice = np.full(m.n_states, -1, dtype=np.int64)

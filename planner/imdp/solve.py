@@ -79,6 +79,7 @@ __all__ = [
     "ValueIteration",
     "resolve_states",
     "solve",
+    "solve_with",
 ]
 
 
@@ -89,11 +90,13 @@ def _settled(
     maximize: bool,
     pessimistic: bool,
     precompute: bool,
+    target_closed: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The states of a reach-avoid problem settled before iterating: ``(settled, value,
     prob1, prob1_choice)``: targets, avoided states and (with ``precompute``) the states
     of value 0 and, worst case maximising, of value 1 by graph analysis, with the rows by
-    which the value-1 states get there (-1 elsewhere)."""
+    which the value-1 states get there (-1 elsewhere). ``target_closed``: the target holds
+    every state that reaches it almost surely, so the probability-1 search is skipped."""
     n = m.n_states
     target = resolve_states(m, prop.target, "target")
     avoid = (
@@ -107,7 +110,8 @@ def _settled(
         zero = np.zeros(n, dtype=bool)
     elif maximize and pessimistic:
         pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
-        prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+        if not target_closed:
+            prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
         zero = ~pos
     elif maximize:
         zero = ~graph.possible_reach(m, target, avoid, rows)
@@ -133,6 +137,19 @@ def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np
 
 def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution:
     """Solve ``problem`` by robust value iteration (see the module docstring)."""
+    return solve_with(problem, algorithm)
+
+
+def solve_with(
+    problem: Problem, algorithm: ValueIteration | None = None, target_closed: bool = False
+) -> Solution:
+    """:func:`solve`, told that a reach-avoid target is closed under almost-sure reach
+    (``target_closed``: every state that reaches it with probability 1 against every
+    adversary, with the problem's rows, lies in it; true of an almost-sure region, such
+    as :func:`planner.imdp.rabin.almost_sure_region`'s): the probability-1 search of the
+    graph precomputation is skipped, as it would find the target itself. For the
+    package's own callers, which know it; a target that is not closed gets correct
+    values but, at the states of value 1 outside it, a strategy from the values alone."""
     alg = ValueIteration() if algorithm is None else algorithm
     m = problem.model
     spec = problem.specification
@@ -148,7 +165,7 @@ def solve(problem: Problem, algorithm: ValueIteration | None = None) -> Solution
         raise SpecificationError("initial values are for discounted reward (reachability from 0)")
     if reach:
         settled, fixed_val, prob1, prob1_choice = _settled(
-            m, prop, rows, maximize, pessimistic, alg.precompute
+            m, prop, rows, maximize, pessimistic, alg.precompute, target_closed
         )
         fixed = fixed | settled
     fixed_val = np.where(fixed, fixed_val, 0.0)

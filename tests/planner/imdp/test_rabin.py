@@ -6,10 +6,11 @@ import importlib
 import numpy as np
 import pytest
 
-from planner.imdp import IMDP
+from planner.imdp import IMDP, graph
 from planner.imdp.analysis import accepting_states, satisfaction
 from planner.imdp.grid import GridWorld
 from planner.imdp.product import ProductIMDP
+from planner.imdp.solve import solve
 from planner.ltl.translate import translate
 from tests.planner.imdp import rabin_reference as ref
 from tests.planner.imdp.helpers import corridor_intervals, until_automaton
@@ -209,3 +210,22 @@ def test_between_sampled_resolutions(formula):
             dist, sigma = ref.sample_resolution(prod_ref, m, aut, rng)
             assert got <= ref.mdp_satisfaction(prod_ref, dist) + 1e-7
             assert got >= float(ref.strategy_value(prod_ref, sigma)[0]) - 1e-7
+
+
+@pytest.mark.parametrize("formula", ["F a & G !b", "G F a", "(G F a) | (F G b)", "G (a -> X b)"])
+def test_almost_sure_region_is_closed_so_the_reachability_skips_its_search(formula, monkeypatch):
+    # every state that reaches the almost-sure region almost surely is in it: solving the
+    # reachability as closed gives what the full graph precomputation gives
+    rng = np.random.default_rng(11 + len(formula))
+    for m, aut, _ in _checked(rng, formula, 4, n=3, max_states=14):
+        prod = ProductIMDP(m, aut)
+        win, _ = rabin.almost_sure_region(prod.model, prod.good_matrix(), prod.bad_matrix())
+        sure, _ = graph.robust_almost_sure_reach(prod.model, win)
+        np.testing.assert_array_equal(sure, win)
+        fast = satisfaction(prod)
+        monkeypatch.setattr(rabin, "solve_with", lambda problem, alg, closed: solve(problem, alg))
+        slow = satisfaction(prod)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(fast.lower, slow.lower)
+        np.testing.assert_array_equal(fast.upper, slow.upper)
+        np.testing.assert_array_equal(fast.strategy, slow.strategy)
