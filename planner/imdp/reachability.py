@@ -54,7 +54,7 @@ from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
 from planner.imdp.stay import (
     chain_stay_allowance,
-    shortest_stay_choice,
+    shortest_stay,
     stay_limit,
     surest_exit_start,
     widening_room,
@@ -352,7 +352,7 @@ def rounding_widened(
     * maximising strategy: an optimal strategy's rows are within ``U - L`` of the best at
       ``U``; among those rows one of short stay is taken: the greedy surest exit
       (:func:`planner.imdp.stay.surest_exit_start`), shortened by policy iteration
-      (:func:`planner.imdp.stay.shortest_stay_choice`) up to ``_SI_MAX_STATES`` free
+      (:func:`planner.imdp.stay.shortest_stay`) up to ``_SI_MAX_STATES`` free
       states, beyond which no sparse LU runs, until the widening fits in the room left to
       ``tolerance`` (or a tenth of an open bracket;
       :func:`planner.imdp.stay.widening_room`). It stands in for an optimal
@@ -383,15 +383,19 @@ def rounding_widened(
                 m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0
             )
             pick = np.where(pick >= 0, pick, np.searchsorted(cand, first[crs[cseg]]))
+        stay = None
         if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
             room = widening_room(lower[st], upper[st], tolerance)
             limit = stay_limit(matrix[near], upper, ROUNDING, room)
-            pick = shortest_stay_choice(matrix[near], crs, pick, limit=limit)
+            pick, stay = shortest_stay(matrix[near], crs, pick, limit=limit)
         chosen = near[pick]
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
         chosen = np.searchsorted(free_rows, np.sort(choice[st]))
-    allowance = chain_stay_allowance(matrix[chosen], rs[chosen], upper, ROUNDING, _SI_MAX_STATES)
+        stay = None
+    allowance = chain_stay_allowance(
+        matrix[chosen], rs[chosen], upper, ROUNDING, _SI_MAX_STATES, stay=stay
+    )
     out = upper.copy()
     out[st] = np.minimum(1.0, upper[st] + allowance[st])
     return out

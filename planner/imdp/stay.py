@@ -26,6 +26,7 @@ def chain_stay_allowance(
     upper: np.ndarray,
     per_step: float,
     direct_limit: int = 20_000,
+    stay: np.ndarray | None = None,
 ) -> np.ndarray:
     """``A^-1 a`` for the chain ``matrix`` (one distribution per state of ``states``, over
     all states): the allowance ``a = per_step + m`` (``m``: :func:`row_rounding` at
@@ -40,17 +41,29 @@ def chain_stay_allowance(
     adversary ``P``, ``U >= P U - e`` gives ``U >= V_sigma - A^-1 e`` only (``A = I - P``
     on the states the chain leaves; on a closed class ``V_sigma = 0 <= U``); on a chain
     that stays ``1e7`` steps, ``1e-15`` per step is ``1e-8``.
+
+    ``stay`` (optional, ``(n_states,)``): the expected stay of this chain among all of
+    ``states`` (:func:`shortest_stay`), finite at each of them: then ``max(a) * stay``
+    bounds ``A^-1 a`` (``A^-1 >= 0``; the states at 0 only shorten the stays) and no
+    factorisation is needed.
     """
     matrix = sp.csr_matrix(matrix, copy=True)
     states = np.asarray(states, dtype=np.int64)
     positive = upper[states] > 0.0
+    out = np.zeros(upper.size)
+    if stay is not None and states.size and np.max(stay[states]) < _NEVER:
+        if positive.any():
+            sub = matrix[positive]
+            a = per_step + row_rounding(sub.indptr, sub.indices, upper, per_entry=3.0)
+            kept = states[positive]
+            out[kept] = (1.0 + SOLVE_MARGIN) * float(np.max(a)) * stay[kept]
+        return out
     states = states[positive]
     matrix = matrix[positive]
     a = per_step + row_rounding(matrix.indptr, matrix.indices, upper, per_entry=3.0)
     inner = matrix[:, states].tocsr()
     leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
     transient = reaching(inner, leak > DUST)
-    out = np.zeros(upper.size)
     idx = np.flatnonzero(transient)
     if idx.size:
         sub = inner[idx][:, idx]
@@ -122,6 +135,10 @@ def stay_limit(matrix: sp.csr_matrix, upper: np.ndarray, per_step: float, room: 
     return room / ((1.0 + SOLVE_MARGIN) * top)
 
 
+_NEVER = 1e300
+"""The expected stay recorded for a state whose chain never leaves."""
+
+
 def shortest_stay_choice(
     matrix: sp.csr_matrix,
     row_states: np.ndarray,
@@ -129,6 +146,17 @@ def shortest_stay_choice(
     rounds: int = 50,
     limit: float = 0.0,
 ) -> np.ndarray:
+    """The choice of :func:`shortest_stay`."""
+    return shortest_stay(matrix, row_states, start, rounds, limit)[0]
+
+
+def shortest_stay(
+    matrix: sp.csr_matrix,
+    row_states: np.ndarray,
+    start: np.ndarray,
+    rounds: int = 50,
+    limit: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Per state one of the candidate rows (``matrix``: one distribution per candidate,
     over all states; ``row_states`` their states, sorted, at least one per state), chosen
     to keep the expected stay among these states short: policy iteration for the minimal
@@ -136,32 +164,40 @@ def shortest_stay_choice(
     :func:`surest_exit_start` gives a good one), ``rounds`` evaluations at most, until no
     state improves or every stay of a leaving state is at most ``limit`` (short enough:
     :func:`stay_limit`); a state whose chain never leaves counts as staying for ever.
-    Returns candidate indices, one per state (each improvement only shortens the
-    stays)."""
+    Returns ``(choice, stay)``: candidate indices, one per state (each improvement only
+    shortens the stays), and the expected stay of that choice per state (``(n_states,)``,
+    ``1e300`` where it never leaves, 0 off these states), or ``None`` when the last round
+    changed the choice without evaluating it."""
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
     inner, states = _inner_rows(matrix, rs)
     choice = np.asarray(start, dtype=np.int64)
+
+    def evaluated(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        full = np.zeros(matrix.shape[1])
+        full[states] = w
+        return choice, full
+
     for _ in range(rounds):
         sub = inner[choice]
         leak = 1.0 - np.asarray(sub.sum(axis=1)).ravel()
         live = reaching(sub, leak > DUST)
-        w = np.full(states.size, 1e300)
+        w = np.full(states.size, _NEVER)
         idx = np.flatnonzero(live)
         if idx.size:
             w[idx] = chain_lu(sub[idx][:, idx]).solve(np.ones(idx.size))
             if np.max(w[idx]) <= limit:
-                break
+                return evaluated(w)
         cost = 1.0 + inner @ w
         best = np.minimum.reduceat(cost, seg)
         better = best < cost[choice] * (1.0 - 1e-9)
         if not better.any():
-            break
+            return evaluated(w)
         top = np.flatnonzero(cost <= best[seg_id])
         top = top[first_of_runs(seg_id[top])]
         choice = np.where(better, top, choice)
-    return choice
+    return choice, None
 
 
 _STAY_SWEEPS = 2_000

@@ -34,6 +34,19 @@ def test_stay_allowance_without_a_factorisation_bounds_the_direct_one():
     assert np.all(direct[free] > 0) and np.all(np.isfinite(jacobi[free]))
     assert np.all(jacobi[free] >= direct[free]) and np.all(jacobi[free] <= 1.06 * direct[free])
     assert direct[20] == direct[21] == 0.0
+    # the chain's expected stay instead of a factorisation: a bound, of the same size
+    stay = np.zeros(n)
+    step = np.arange(20)
+    sub = chain[:, :20].toarray()
+    stay[step] = np.linalg.solve(np.eye(20) - sub, np.ones(20))
+    bounded = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15, stay=stay)
+    assert np.all(bounded[free] >= direct[free]) and np.all(bounded[free] <= 3 * direct[free])
+    assert bounded[20] == bounded[21] == 0.0
+    never = stay.copy()
+    never[3] = 1e300  # a stay that never ends: the factorisation again
+    np.testing.assert_array_equal(
+        chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15, stay=never), direct
+    )
 
 
 def _candidates(rng: np.random.Generator, n: int, closed: int) -> tuple[sp.csr_matrix, np.ndarray]:
@@ -127,7 +140,7 @@ def test_surest_exit_start_prefers_the_sure_step_to_a_creeping_one():
 def test_shortest_stay_choice_reaches_the_enumerated_minimum(seed):
     import itertools
 
-    from planner.imdp.stay import shortest_stay_choice, surest_exit_start
+    from planner.imdp.stay import shortest_stay, shortest_stay_choice, surest_exit_start
 
     rng = np.random.default_rng(100 + seed)
     n = 6
@@ -138,8 +151,12 @@ def test_shortest_stay_choice_reaches_the_enumerated_minimum(seed):
     best = np.full(n, np.inf)
     for combo in itertools.product(*per_state):
         best = np.minimum(best, _stays(matrix, rs, np.array(combo)))
-    choice = shortest_stay_choice(matrix, rs, start)
+    choice, stay = shortest_stay(matrix, rs, start)
+    assert np.array_equal(shortest_stay_choice(matrix, rs, start), choice)
     got = _stays(matrix, rs, choice)
+    # the stay returned is the choice's
+    np.testing.assert_allclose(stay[:n], got, rtol=1e-10)
+    assert stay[n] == 0.0
     assert np.all(got <= _stays(matrix, rs, start) * (1 + 1e-12))
     assert np.allclose(got, best, rtol=1e-8)
     # a limit the start already meets keeps the start
