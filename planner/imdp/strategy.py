@@ -27,6 +27,7 @@ def strategy_iteration(
     tol: float,
     max_rounds: int | None = None,
     sound: bool = True,
+    start: np.ndarray | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Robust strategy iteration for maximal reachability, started from a strategy
     greedy for ``v`` (among its optimal rows, the surest exit: :func:`_surest_start`).
@@ -47,14 +48,19 @@ def strategy_iteration(
     lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
     ``sound=False``: the evaluations are not lowered by their rounding bound (the values
     are then a candidate, not a lower bound; see :func:`strategy_reach_value`).
+    ``start``: the first strategy (one row of ``free_rows`` per free state, in state
+    order) instead of the greedy one, e.g. the result of a related strategy iteration.
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
     full = OrderingAdversary(m, adversary_minimizes, rows=free_rows)
-    q = full.expectation(v)
-    choice = strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
-    sigma = _surest_start(full.matrix(v), free_rows, rs, q, seg, v, choice[rs[seg]], tol)
+    if start is None:
+        q = full.expectation(v)
+        choice = strategy_rows(m, free_rows, q, seg, rs[seg], v, True, True, tol)
+        sigma = _surest_start(full.matrix(v), free_rows, rs, q, seg, v, choice[rs[seg]], tol)
+    else:
+        sigma = np.asarray(start, dtype=np.int64)
     slack = tol * 1e-2
     best: np.ndarray | None = None
     limit = MAX_IMPROVEMENTS if max_rounds is None else max_rounds

@@ -42,3 +42,28 @@ def test_strategy_iteration_ends_at_the_jump(start):
     x, sigma, _ = strategy_iteration(m, free_rows, v, fixed, True, 1e-8)
     assert sigma is not None and m.row_action[sigma[0]] == 1
     assert x[0] == pytest.approx(0.5, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_strategy_iteration_from_a_given_start(seed):
+    # from any first strategy it ends at the same values; from its own result at once
+    from tests.planner.imdp.reference import random_imdp
+
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=30, n_actions=3, max_succ=4, zero_lower=False)
+    goal = m.states_labelled("goal")
+    free = ~goal
+    free[0] = False  # the absorbing sink
+    free_rows = np.flatnonzero(free[m.row_state])
+    fixed = np.where(goal, 1.0, 0.0)
+    x, sigma, _ = strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10)
+    assert sigma is not None
+    rs = m.row_state[free_rows]
+    first = free_rows[np.flatnonzero(np.r_[True, rs[1:] != rs[:-1]])]
+    assert (first != sigma).any()  # a start that is not optimal
+    x2, sigma2, _ = strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=first)
+    assert sigma2 is not None
+    np.testing.assert_allclose(x2, x, atol=1e-9)
+    x3, _, rounds = strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma)
+    assert rounds == 1
+    np.testing.assert_allclose(x3, x, atol=1e-12)
