@@ -17,7 +17,7 @@ from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.solve import Solution, ValueIteration
 from planner.imdp.stay import (
     chain_stay_allowance,
-    shortest_stay_choice,
+    shortest_stay,
     stay_limit,
     surest_exit_start,
     widening_room,
@@ -159,8 +159,8 @@ def rounding_widened(
     start = np.searchsorted(near, top[free[m.row_state[top]]])
     start = surest_exit_start(mat, rs[near], start)
     limit = stay_limit(mat, upper, ROUNDING, widening_room(lower[free], upper[free], tol))
-    choice = shortest_stay_choice(mat, rs[near], start, limit=limit)
-    allowance = chain_stay_allowance(mat[choice], rs[near[choice]], upper, ROUNDING)
+    choice, stay = shortest_stay(mat, rs[near], start, limit=limit)
+    allowance = chain_stay_allowance(mat[choice], rs[near[choice]], upper, ROUNDING, stay=stay)
     widened = np.where(free, np.minimum(1.0, upper + allowance), upper)
     return replace(sol, upper=widened, converged=bool(np.max(widened - lower) < tol))
 
