@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.model import IMDP, first_of_runs, run_ids
@@ -61,6 +62,17 @@ def strategy_iteration(
         sigma = _surest_start(full.matrix(v), free_rows, rs, q, seg, v, choice[rs[seg]], tol)
     else:
         sigma = np.asarray(start, dtype=np.int64)
+        pos = np.searchsorted(free_rows, sigma)
+        if (
+            sigma.shape != seg.shape
+            or np.any(pos >= free_rows.size)
+            or not np.array_equal(free_rows[np.minimum(pos, free_rows.size - 1)], sigma)
+            or not np.array_equal(m.row_state[sigma], rs[seg])
+        ):
+            raise SpecificationError(
+                "start must give one of the free rows per free state, in state order "
+                f"({seg.size} states)"
+            )
     slack = tol * 1e-2
     best: np.ndarray | None = None
     limit = MAX_IMPROVEMENTS if max_rounds is None else max_rounds

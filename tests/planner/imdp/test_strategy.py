@@ -67,3 +67,10 @@ def test_strategy_iteration_from_a_given_start(seed):
     x3, _, rounds = strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma)
     assert rounds == 1
     np.testing.assert_allclose(x3, x, atol=1e-12)
+    # a start that is not one free row per free state is refused
+    from planner.errors import SpecificationError
+
+    with pytest.raises(SpecificationError, match="one of the free rows per free state"):
+        strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma[:-1])
+    with pytest.raises(SpecificationError, match="one of the free rows per free state"):
+        strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma[::-1])
