@@ -168,14 +168,15 @@ class _IntervalIteration:
 
         The two sides share no mutable data (``v`` and ``crit`` below, ``u`` and
         ``crit_up`` above) and their kernels release the GIL, so the pass from above runs
-        on a second thread meanwhile; the result is the same as one after the other."""
+        on a second thread meanwhile; the result is the same as one after the other. (The
+        full sweep's bounds are a copy of the pass's row cache taken before the pass.)"""
         self.it += 1
+        full = self.it % FULL_EVERY == 1
+        bound = self.cache.copy() if PRUNE and full else None
         above = _pool().submit(self._from_above)
         try:
             for k in range(LOWER_SWEEPS):
-                self.residual = self.sweeper.sweep(
-                    self.v, k == 0 and self.it % FULL_EVERY == 1, self.cache if PRUNE else None
-                )
+                self.residual = self.sweeper.sweep(self.v, k == 0 and full, bound)
                 self.bounds.collapse(self.v)
                 self.sweeps += 1
                 if self.alg.callback is not None:
