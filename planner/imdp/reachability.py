@@ -365,6 +365,7 @@ def rounding_widened(
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
     st = rs[seg]
+    stay = None  # the chosen chain's expected stays, when a policy iteration found them
     # one distribution per free row, the adversary's at ``upper``: every chain below is a
     # selection of its rows
     matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=free_rows).matrix(upper))
@@ -383,7 +384,6 @@ def rounding_widened(
                 m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0
             )
             pick = np.where(pick >= 0, pick, np.searchsorted(cand, first[crs[cseg]]))
-        stay = None
         if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
             room = widening_room(lower[st], upper[st], tolerance)
             limit = stay_limit(matrix[near], upper, ROUNDING, room)
@@ -392,7 +392,6 @@ def rounding_widened(
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
         chosen = np.searchsorted(free_rows, np.sort(choice[st]))
-        stay = None
     allowance = chain_stay_allowance(
         matrix[chosen], rs[chosen], upper, ROUNDING, _SI_MAX_STATES, stay=stay
     )

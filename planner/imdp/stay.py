@@ -6,7 +6,7 @@ certifies ``U >= V_sigma - A^-1 e`` only, ``A = I - P`` on the states the chain 
 strategy and its adversary leaves: the noise summed over the expected stay
 (:func:`chain_stay_allowance`). The bracket is widened by that allowance, so the upper
 bound's check needs a strategy whose stays are short (:func:`surest_exit_start`,
-:func:`shortest_stay_choice`), within the room the tolerance leaves
+:func:`shortest_stay`), within the room the tolerance leaves
 (:func:`widening_room`, :func:`stay_limit`).
 """
 
@@ -49,18 +49,16 @@ def chain_stay_allowance(
     """
     matrix = sp.csr_matrix(matrix, copy=True)
     states = np.asarray(states, dtype=np.int64)
+    finite_stay = stay is not None and states.size and np.max(stay[states]) < _NEVER
     positive = upper[states] > 0.0
-    out = np.zeros(upper.size)
-    if stay is not None and states.size and np.max(stay[states]) < _NEVER:
-        if positive.any():
-            sub = matrix[positive]
-            a = per_step + row_rounding(sub.indptr, sub.indices, upper, per_entry=3.0)
-            kept = states[positive]
-            out[kept] = (1.0 + SOLVE_MARGIN) * float(np.max(a)) * stay[kept]
-        return out
     states = states[positive]
     matrix = matrix[positive]
     a = per_step + row_rounding(matrix.indptr, matrix.indices, upper, per_entry=3.0)
+    out = np.zeros(upper.size)
+    if finite_stay:
+        if states.size:
+            out[states] = (1.0 + SOLVE_MARGIN) * float(np.max(a)) * stay[states]
+        return out
     inner = matrix[:, states].tocsr()
     leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
     transient = reaching(inner, leak > DUST)
@@ -98,7 +96,7 @@ def surest_exit_start(
     over all states; ``row_states`` their states, sorted, at least one per state) whose
     chain leaves these states from every state that can leave them: the greedy choice of
     :func:`planner.imdp.kernels.surest_exit_choice` (rows with the largest one-step mass
-    towards the exit), a good start for :func:`shortest_stay_choice`; ``fallback`` (a
+    towards the exit), a good start for :func:`shortest_stay`; ``fallback`` (a
     candidate index per state) where no path leaves, -1 there without one. Returns
     candidate indices."""
     inner, states = _inner_rows(matrix, row_states)
@@ -137,17 +135,6 @@ def stay_limit(matrix: sp.csr_matrix, upper: np.ndarray, per_step: float, room: 
 
 _NEVER = 1e300
 """The expected stay recorded for a state whose chain never leaves."""
-
-
-def shortest_stay_choice(
-    matrix: sp.csr_matrix,
-    row_states: np.ndarray,
-    start: np.ndarray,
-    rounds: int = 50,
-    limit: float = 0.0,
-) -> np.ndarray:
-    """The choice of :func:`shortest_stay`."""
-    return shortest_stay(matrix, row_states, start, rounds, limit)[0]
 
 
 def shortest_stay(

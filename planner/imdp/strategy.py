@@ -62,11 +62,9 @@ def strategy_iteration(
         sigma = _surest_start(full.matrix(v), free_rows, rs, q, seg, v, choice[rs[seg]], tol)
     else:
         sigma = np.asarray(start, dtype=np.int64)
-        pos = np.searchsorted(free_rows, sigma)
         if (
             sigma.shape != seg.shape
-            or np.any(pos >= free_rows.size)
-            or not np.array_equal(free_rows[np.minimum(pos, free_rows.size - 1)], sigma)
+            or not np.isin(sigma, free_rows).all()
             or not np.array_equal(m.row_state[sigma], rs[seg])
         ):
             raise SpecificationError(
