@@ -180,10 +180,9 @@ def recurrence_candidates(
     them: the end components that must visit ``good`` can be searched for there alone."""
     rows = _all_rows(model, rows)
     states = np.asarray(states, dtype=bool)
-    rows = rows & states[model.row_state]
     src = np.asarray(good, dtype=bool) & states
-    ptr, inc_row, _, inc_upper = model.incoming()
-    back = backward_distance(src, rows, model.row_state, ptr, inc_row, inc_upper) < np.inf
+    back = possible_reach(model, src, ~states, rows)
+    rows = rows & states[model.row_state]
     fwd = forward_reach(
         src, rows, model.state_ptr, model.row_ptr, model.successor, model.upper, states
     )
