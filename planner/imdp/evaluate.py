@@ -59,8 +59,8 @@ def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     dist = backward_distance(
         np.asarray(seeds, dtype=bool),
         np.ones(n, bool),
-        np.arange(n),
         ptr,
+        src[order],
         src[order],
         np.ones(order.size),
     )

@@ -165,8 +165,8 @@ def possible_reach(
     target = np.asarray(target, dtype=bool)
     avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
     rows = rows & (~avoid & ~target)[model.row_state]
-    ptr, inc_row, _, inc_upper = model.incoming()
-    dist = backward_distance(target, rows, model.row_state, ptr, inc_row, inc_upper)
+    ptr, inc_row, inc_state, _, inc_upper = model.reverse_index()
+    dist = backward_distance(target, rows, ptr, inc_row, inc_state, inc_upper)
     return dist < np.inf
 
 
@@ -216,7 +216,7 @@ def _attractor(
     ``O(entries of the candidate rows)``. ``choice[s]``: the row by which ``s`` joined; it
     puts positive mass, under every adversary, into states that joined before ``s``."""
     m = model
-    ptr, inc_row, inc_lower, inc_upper = m.incoming()
+    ptr, inc_row, inc_state, inc_lower, inc_upper = m.reverse_index()
     return robust_attractor(
         np.asarray(start, dtype=bool),
         np.asarray(cand_rows, dtype=bool),
@@ -227,6 +227,7 @@ def _attractor(
         m.upper,
         ptr,
         inc_row,
+        inc_state,
         inc_lower,
         inc_upper,
         1.0 - m.tolerance,

@@ -238,7 +238,7 @@ class IMDP:
         self.enabled[row_state, row_action] = True
         self.row_index: np.ndarray = np.full((n, n_act), -1, dtype=np.int64)
         self.row_index[row_state, row_action] = np.arange(len(row_state))
-        self._incoming: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._incoming: tuple[np.ndarray, ...] | None = None
 
     def _set_rest(self, initial: Iterable[int], action_names: Sequence[str] | None) -> None:
         n, n_act = self.n_states, self.n_actions
@@ -323,12 +323,17 @@ class IMDP:
         the entries whose successor is ``s``, by their row and bounds (stored in that
         order, so walking a state's predecessors reads memory sequentially; computed once,
         then cached)."""
+        ptr, rows, _, lower, upper = self.reverse_index()
+        return ptr, rows, lower, upper
+
+    def reverse_index(self) -> tuple[np.ndarray, ...]:
+        """:meth:`incoming` with each entry's row state: ``(ptr, rows, states, lower,
+        upper)``, ``states = row_state[rows]`` stored in the same order (cached)."""
         if self._incoming is None:
             from planner.imdp.kernels import incoming_index  # kernels import this module
 
-            view = incoming_index(
-                self.successor, self.entry_row, self.lower, self.upper, self.n_states
-            )
+            fields = (self.successor, self.entry_row, self.row_state, self.lower, self.upper)
+            view = incoming_index(*fields, self.n_states)
             for a in view:
                 a.setflags(write=False)
             self._incoming = view

@@ -86,7 +86,7 @@ class _Game:
         self.good = np.asarray(good, dtype=bool).reshape(-1, model.n_states)
         self.bad = np.asarray(bad, dtype=bool).reshape(-1, model.n_states)
         # the model's reverse index (and, on demand, the entries' order in it)
-        self.inc_ptr, self.inc_row, _, _ = model.incoming()
+        self.inc_ptr, self.inc_row, self.inc_state, _, _ = model.reverse_index()
         self._order: np.ndarray | None = None
         self.limit = 1.0 - model.tolerance
 
@@ -140,6 +140,7 @@ class _Game:
             up,
             self.inc_ptr,
             self.inc_row,
+            self.inc_state,
             inc_lo,
             inc_up,
             self.limit,

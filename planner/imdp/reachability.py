@@ -121,9 +121,9 @@ def layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
     state to ``sources``; ``inf`` where there is no path."""
     row_mask = np.zeros(m.n_rows, dtype=bool)
     row_mask[free_rows] = True
-    ptr, inc_row, _, inc_upper = m.incoming()
+    ptr, inc_row, inc_state, _, inc_upper = m.reverse_index()
     return backward_distance(
-        np.asarray(sources, dtype=bool), row_mask, m.row_state, ptr, inc_row, inc_upper
+        np.asarray(sources, dtype=bool), row_mask, ptr, inc_row, inc_state, inc_upper
     )
 
 

@@ -19,6 +19,7 @@ def robust_attractor(
     upper,
     inc_ptr,
     inc_row,
+    inc_state,
     inc_lower,
     inc_upper,
     limit,
@@ -30,8 +31,10 @@ def robust_attractor(
     into it while the upper bounds of the entries outside sum to less than ``limit``
     (``1 - tolerance``). Each state that joins updates only the rows with an entry into it,
     so the whole attractor costs ``O(entries of the candidate rows + their incoming
-    lists)``. Returns ``(mask, choice)``: ``choice[s]`` is the row by which ``s`` joined
-    (-1 for ``start`` and outside); a joining row only counts states that joined before.
+    lists)``; an incoming entry of a row whose state (``inc_state``, read in order) has
+    joined is skipped without looking at the row. Returns ``(mask, choice)``:
+    ``choice[s]`` is the row by which ``s`` joined (-1 for ``start`` and outside); a
+    joining row only counts states that joined before.
     """
     n_rows = row_ptr.size - 1
     x = start.copy()
@@ -64,6 +67,9 @@ def robust_attractor(
         t = queue[head]
         head += 1
         for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            s = inc_state[k]
+            if x[s]:
+                continue  # the row's state has joined: its counts no longer matter
             r = inc_row[k]
             if not cand[r]:
                 continue
@@ -72,8 +78,7 @@ def robust_attractor(
             if inc_upper[k] > 0.0:
                 touches[r] = True
             outside_up[r] -= inc_upper[k]
-            s = row_state[r]
-            if not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
+            if must[r] or (touches[r] and outside_up[r] < limit):
                 x[s] = True
                 choice[s] = r
                 queue[tail] = s
@@ -119,9 +124,11 @@ def counting_order(keys, n_keys):
 
 
 @numba.njit(cache=True, nogil=True)
-def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper):
+def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper):
     """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
-    entries of the rows in ``row_mask`` (``inf`` where no path)."""
+    entries of the rows in ``row_mask`` (``inf`` where no path). ``inc_state``: the state
+    of each incoming entry's row (:meth:`planner.imdp.model.IMDP.reverse_index`), read
+    in order, so that an entry from a state already reached costs no lookup of its row."""
     dist = np.full(sources.size, np.inf)
     queue = np.empty(sources.size, dtype=np.int64)
     tail = 0
@@ -134,15 +141,14 @@ def backward_distance(sources, row_mask, row_state, inc_ptr, inc_row, inc_upper)
     while head < tail:
         t = queue[head]
         head += 1
+        d = dist[t] + 1.0
         for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            r = inc_row[k]
-            if not row_mask[r] or inc_upper[k] <= 0.0:
+            s = inc_state[k]
+            if dist[s] != np.inf or inc_upper[k] <= 0.0 or not row_mask[inc_row[k]]:
                 continue
-            s = row_state[r]
-            if dist[s] == np.inf:
-                dist[s] = dist[t] + 1.0
-                queue[tail] = s
-                tail += 1
+            dist[s] = d
+            queue[tail] = s
+            tail += 1
     return dist
 
 
@@ -219,10 +225,11 @@ def prune_kernel(
 
 
 @numba.njit(cache=True, nogil=True)
-def incoming_index(successor, entry_row, lower, upper, n_states):
+def incoming_index(successor, entry_row, row_state, lower, upper, n_states):
     """The reverse index of the entries, grouped by successor (stable): ``(ptr, rows,
-    lower, upper)``, positions ``ptr[s]:ptr[s + 1]`` for the entries into ``s`` (one
-    counting pass and one scattering pass over the entries, read in order)."""
+    states, lower, upper)``, positions ``ptr[s]:ptr[s + 1]`` for the entries into ``s``
+    (``states``: the state of each entry's row; one counting pass and one scattering pass
+    over the entries, read in order)."""
     ptr = np.zeros(n_states + 1, dtype=np.int64)
     for t in successor:
         ptr[t + 1] += 1
@@ -230,15 +237,18 @@ def incoming_index(successor, entry_row, lower, upper, n_states):
         ptr[i + 1] += ptr[i]
     fill = ptr[:-1].copy()
     rows = np.empty(successor.size, dtype=np.int64)
+    states = np.empty(successor.size, dtype=np.int64)
     lo = np.empty(successor.size)
     up = np.empty(successor.size)
     for e in range(successor.size):
         k = fill[successor[e]]
         fill[successor[e]] = k + 1
-        rows[k] = entry_row[e]
+        r = entry_row[e]
+        rows[k] = r
+        states[k] = row_state[r]
         lo[k] = lower[e]
         up[k] = upper[e]
-    return ptr, rows, lo, up
+    return ptr, rows, states, lo, up
 
 
 @numba.njit(cache=True, nogil=True)

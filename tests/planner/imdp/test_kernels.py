@@ -132,6 +132,30 @@ def test_chain_reaching_matches_a_breadth_first_search_on_the_transpose(seed):
     assert got[seeds].all() and 0 < got.sum() < n
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_layers_are_breadth_first_hop_counts_over_the_free_rows(seed):
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import shortest_path
+
+    from planner.imdp.reachability import layers
+
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=80, max_succ=4, zero_lower=bool(seed % 2))
+    ptr, rows, states, _, _ = m.reverse_index()
+    np.testing.assert_array_equal(states, m.row_state[rows])
+    assert np.array_equal(ptr, np.searchsorted(np.sort(m.successor), np.arange(m.n_states + 1)))
+    free = np.flatnonzero(rng.random(m.n_rows) < 0.6)
+    sources = rng.random(m.n_states) < 0.05
+    sources[0] = True
+    got = layers(m, free, sources)
+    keep = np.isin(m.entry_row, free) & (m.upper > 0)
+    src, dst = m.row_state[m.entry_row[keep]], m.successor[keep]
+    adj = sp.csr_matrix((np.ones(src.size), (dst, src)), shape=(m.n_states, m.n_states))
+    hops = shortest_path(adj, unweighted=True, indices=np.flatnonzero(sources)).min(axis=0)
+    np.testing.assert_array_equal(got, hops)
+    assert np.isfinite(got).sum() > sources.sum()
+
+
 def _upper_start(m: IMDP) -> tuple[np.ndarray, np.ndarray]:
     """Free rows (not at the goal or the absorbing sink 0) and ``U = 1`` there, the goal at
     1 and the sink at 0."""
