@@ -56,13 +56,9 @@ def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     edge = adj.data > 0
     src = np.repeat(np.arange(n, dtype=np.int64), np.diff(adj.indptr))[edge]
     order, ptr = counting_order(adj.indices[edge].astype(np.int64), n)
+    inc = src[order]  # each state is its own row, so an edge's row and state coincide
     dist = backward_distance(
-        np.asarray(seeds, dtype=bool),
-        np.ones(n, bool),
-        ptr,
-        src[order],
-        src[order],
-        np.ones(order.size),
+        np.asarray(seeds, dtype=bool), np.ones(n, bool), ptr, inc, inc, np.ones(order.size)
     )
     return np.isfinite(dist)
 
