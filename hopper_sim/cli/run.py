@@ -195,19 +195,36 @@ class _WholeEvents:
     While :meth:`interrupts_between_events` is active, SIGINT and SIGTERM raise
     ``KeyboardInterrupt`` at once, except while an event is being handed out: then it is
     raised when every observer has the event. Otherwise the count of finished runs, the
-    recording and the figure could disagree by the run whose end the signal split.
+    recording and the figure could disagree by the run whose end the signal split. An
+    interrupt that Python drops because it landed in a finaliser is raised again after.
     """
 
     def __init__(self, fan) -> None:
         self.fan = fan
         self._busy = False
         self._pending: int | None = None
+        self._raised: int | None = None
+        self._previous_hook = sys.unraisablehook
 
     def _signal(self, signum: int, frame) -> None:
         if self._busy:
             self._pending = signum
         else:
+            self._raised = signum
             raise KeyboardInterrupt(f"signal {signum}")
+
+    def _dropped(self, unraisable) -> None:
+        """``sys.unraisablehook``: an interrupt raised inside a finaliser or a weakref
+        callback (numba's llvmlite objects are finalised while kernels compile) is printed
+        and dropped by Python; deliver it again instead, once the finaliser has returned."""
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and self._raised is not None:
+            import _thread
+            import threading
+
+            # from another thread: raised here, in the hook, it would be dropped again
+            threading.Timer(0.01, _thread.interrupt_main, (self._raised,)).start()
+        else:
+            self._previous_hook(unraisable)
 
     @contextmanager
     def interrupts_between_events(self) -> Iterator[None]:
@@ -219,11 +236,13 @@ class _WholeEvents:
             return
         kinds = (signal.SIGINT, signal.SIGTERM)
         previous = [signal.signal(k, self._signal) for k in kinds]
+        self._previous_hook, sys.unraisablehook = sys.unraisablehook, self._dropped
         try:
             yield
         finally:
             for k, handler in zip(kinds, previous, strict=True):
                 signal.signal(k, handler)
+            sys.unraisablehook = self._previous_hook
 
     def _deliver(self, handler, event) -> None:
         self._busy = True

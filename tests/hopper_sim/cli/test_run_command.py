@@ -3,6 +3,7 @@
 import json
 import os
 import signal
+import sys
 import time
 
 import pytest
@@ -99,3 +100,23 @@ def test_an_interrupt_during_an_event_lands_after_every_observer_has_it(kind):
             os.kill(os.getpid(), kind)
             time.sleep(1.0)
     assert signal.getsignal(kind) is not whole._signal  # restored
+
+
+@pytest.mark.parametrize("kind", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_inside_a_finalizer_is_not_lost(kind):
+    import gc
+
+    from hopper_sim.cli.run import _WholeEvents
+    from hopper_sim.navigation.events import Observers
+
+    class Signals:
+        def __del__(self):
+            os.kill(os.getpid(), kind)  # the handler runs here, inside __del__
+
+    whole = _WholeEvents(Observers([]))
+    with whole.interrupts_between_events():
+        with pytest.raises(KeyboardInterrupt):
+            Signals()
+            gc.collect()
+            time.sleep(1.0)
+    assert sys.unraisablehook is not whole._dropped  # restored
