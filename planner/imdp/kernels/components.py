@@ -6,7 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import row_value, scratch
+from planner.imdp.kernels.rows import scratch, sorted_value, threshold_value
 
 
 @numba.njit(cache=True, nogil=True)
@@ -317,7 +317,9 @@ def component_exit_bound(
         best = 0.0
         for k in range(exit_ptr[c], exit_ptr[c + 1]):
             r = exit_rows[k]
-            q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+            q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if q != q:
+                q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             if q > best:
                 best = q
         for k in range(member_ptr[c], member_ptr[c + 1]):

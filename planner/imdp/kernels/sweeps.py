@@ -15,7 +15,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import all_row_values, gather_rows, row_value, scratch
+from planner.imdp.kernels.rows import (
+    all_row_values,
+    gather_rows,
+    scratch,
+    sorted_value,
+    threshold_value,
+)
 from planner.imdp.model import IMDP, first_of_runs, row_entries
 
 
@@ -72,17 +78,29 @@ def gauss_seidel_sweep(
             # the last best row first; a row whose bound is below the best so far can
             # neither beat nor tie it
             arg = best_row[k]
-            best = row_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+            best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if best != best:
+                best = sorted_value(
+                    arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                )
             for r in range(lo, hi):
                 if r == arg or bound[r] < best:
                     continue
-                q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                if q != q:
+                    q = sorted_value(
+                        r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                    )
                 if q > best or (q == best and r < arg):
                     best = q
                     arg = r
         else:
             for r in range(lo, hi):
-                q = row_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                if q != q:
+                    q = sorted_value(
+                        r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                    )
                 if (q > best) if maximize else (q < best):
                     best = q
                     arg = r
@@ -210,13 +228,20 @@ def upper_sweep(
                 if fresh[top - lo]:
                     best = cache[top]
                     break
-                cache[top] = row_value(
-                    top, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
-                )
+                q = threshold_value(top, row_ptr, remaining, succ, lower, gap, u, sign, crit)
+                if q != q:
+                    q = sorted_value(
+                        top, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
+                    )
+                cache[top] = q
                 fresh[top - lo] = True
         else:
             for r in range(lo, hi):
-                q = row_value(r, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys)
+                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, u, sign, crit)
+                if q != q:
+                    q = sorted_value(
+                        r, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
+                    )
                 if (q > best) if maximize else (q < best):
                     best = q
         old = u[s]
