@@ -8,6 +8,10 @@ whether ``x`` is its outer axis, the outer axis's bins (CSR ``optr``/``obin``) a
 values (``vval[vptr[r]:vptr[r + 1]]``, one block of the row's length per vertex), the inner
 axis's bins, lower bounds, gaps ``u - l`` and remaining mass ``1 - sum(l)``, and the
 successor maps with the map of each row.
+
+The per-row helpers are inlined into the loops, each with one exit: called as functions,
+numba kept the reference counts of the layout's arrays per call, and the operator over
+a random 3000-state model with 4 x 4 bins took 9.6 ms instead of 2.1 ms.
 """
 
 from __future__ import annotations
@@ -71,16 +75,17 @@ def vertices(ptr, lo, up, rows, tol):
     return vptr, values[:pos]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _successor(lay, r, i, j):
-    """The successor of row ``r`` for its ``i``-th outer and ``j``-th inner bin."""
+    """The successor of row ``r`` for its ``i``-th outer and ``j``-th inner bin (one exit,
+    inlined: see :func:`planner.imdp.kernels.rows.threshold_value`)."""
     outer_x, optr, obin, _, _, iptr, ibin, _, _, _, maps, row_map = lay
-    if outer_x[r]:
-        return maps[row_map[r], obin[optr[r] + i], ibin[iptr[r] + j]]
-    return maps[row_map[r], ibin[iptr[r] + j], obin[optr[r] + i]]
+    o = obin[optr[r] + i]
+    n = ibin[iptr[r] + j]
+    return maps[row_map[r], o, n] if outer_x[r] else maps[row_map[r], n, o]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _value_at_vertex(lay, vs, r, v, sign, w, idx, keys, pin):
     """The signed expectation of ``v`` for row ``r`` at one outer vertex (at
     ``vval[vs:]``) with the inner distribution the ordering adversary picks for it,
@@ -119,7 +124,7 @@ def _value_at_vertex(lay, vs, r, v, sign, w, idx, keys, pin):
     return q
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _best_vertex(lay, r, v, sign, w, idx, keys, pin):
     """The adversary's best outer vertex of row ``r``: ``(signed value, vertex start)``."""
     _, optr, _, vptr, _, _, _, _, _, _, _, _ = lay
@@ -140,7 +145,7 @@ def _scratch(width):
     return np.empty(width), np.empty(width, dtype=np.int64), np.empty(width), np.empty(width)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def row_value(lay, r, v, minimize, w, idx, keys, pin):
     """The adversary's (min or max) expectation of ``v`` for row ``r``: the best of the
     outer axis's vertices, each with the inner axis ordered."""
