@@ -43,14 +43,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from planner.imdp import certify, strategy
 from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
 from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.kernels.sweeps import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs, run_ids
-from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import ValueIteration
 from planner.imdp.stay import (
     chain_stay_allowance,
@@ -325,7 +323,14 @@ def reach_values(
     result = run.result()
     if alg.certified:
         result.upper = rounding_widened(
-            m, free_rows, result.lower, result.upper, adversary_minimizes, maximize, alg.tolerance
+            m,
+            free_rows,
+            result.lower,
+            result.upper,
+            adversary_minimizes,
+            maximize,
+            alg.tolerance,
+            run.sweeper,
         )
     return result
 
@@ -337,7 +342,8 @@ def rounding_widened(
     upper: np.ndarray,
     adversary_minimizes: bool,
     maximize: bool,
-    tolerance: float = 0.0,
+    tolerance: float,
+    sweeper: ReachSweeper,
 ) -> np.ndarray:
     """``upper`` plus what floating point may have hidden from its certificate.
 
@@ -361,6 +367,11 @@ def rounding_widened(
       the bracket as it must.
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
+
+    ``sweeper``: the layout of ``free_rows`` that computed the bracket; its critical
+    successors give the adversary's distributions at ``upper`` without sorting every row
+    again (:meth:`planner.imdp.kernels.ReachSweeper.adversary_matrix`: on the random
+    100k-state benchmark model 0.10-0.13 s instead of 0.24 s).
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
@@ -368,7 +379,7 @@ def rounding_widened(
     stay = None  # the chosen chain's expected stays, when a policy iteration found them
     # one distribution per free row, the adversary's at ``upper``: every chain below is a
     # selection of its rows
-    matrix = sp.csr_matrix(OrderingAdversary(m, adversary_minimizes, rows=free_rows).matrix(upper))
+    matrix = sweeper.adversary_matrix(upper)
     q = matrix @ upper
     if maximize:
         slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING

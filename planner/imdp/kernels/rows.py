@@ -127,6 +127,42 @@ def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_mini
 
 
 @numba.njit(cache=True, nogil=True)
+def row_distributions(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
+    """The adversary's distribution of every row of the layout at ``v``, per entry: the
+    successors with keys below the critical one's (see :func:`threshold_value`) get their
+    upper bounds, those tied with it the rest of ``rem`` in entry order, the others their
+    lower bounds; the same distribution as the ordering adversary's
+    (:class:`planner.imdp.ordering.OrderingAdversary`) up to the order among ties and the
+    rounding of the sums, without sorting the rows that still stand. ``crit`` is updated
+    where a row's critical successor moved."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    idx, keys = scratch(row_ptr)
+    prob = np.empty(succ.size)
+    for r in range(row_ptr.size - 1):
+        a = row_ptr[r]
+        q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+        if q != q:
+            sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+        t = sign * v[succ[crit[r]]]
+        left = remaining[r]
+        for i in range(a, row_ptr[r + 1]):
+            k = sign * v[succ[i]]
+            keys[i - a] = k
+            if k < t:
+                left -= gap[i]
+        for i in range(a, row_ptr[r + 1]):
+            k = keys[i - a]
+            add = 0.0
+            if k < t:
+                add = gap[i]
+            elif k == t and left > 0.0:
+                add = gap[i] if gap[i] < left else left
+                left -= add
+            prob[i] = lower[i] + add
+    return prob
+
+
+@numba.njit(cache=True, nogil=True)
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
     new_ptr = np.zeros(sel.size + 1, dtype=np.int64)

@@ -59,6 +59,36 @@ def test_lazy_upper_pass_equals_the_full_pass_while_values_decrease(seed):
     assert min(evaluated[1:]) < m.n_rows  # later passes skip rows
 
 
+@pytest.mark.parametrize("minimize", [True, False])
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_adversary_matrix_is_an_optimal_distribution_of_every_row(minimize, zero_lower):
+    # from the layout's thresholds, rows in the constructor's order, ties at the threshold
+    # included: within the bounds, summing to 1, attaining the adversary's optimum
+    rng = np.random.default_rng(5)
+    m = random_imdp(rng, n_states=40, max_succ=7, zero_lower=zero_lower)
+    rows = rows_of(m)
+    free = np.flatnonzero(m.row_state > 0)
+    key = np.random.default_rng(1).random(m.n_states)
+    sw = ReachSweeper(m, free, key, True, minimize)
+    v = rng.random(m.n_states)
+    for step in range(6):
+        v = v + rng.normal(0.0, 0.05, m.n_states) if step % 2 else rng.random(m.n_states)
+        v[rng.random(m.n_states) < 0.3] = 0.5
+        sw.sweep(v.copy())  # moves the layout's thresholds, as a solve does
+        mat = sw.adversary_matrix(v)
+        assert mat.shape == (free.size, m.n_states)
+        for i, r in enumerate(free):
+            row = rows[(int(m.row_state[r]), int(m.row_action[r]))]
+            p = mat.getrow(i).toarray().ravel()
+            lo = np.zeros(m.n_states)
+            up = np.zeros(m.n_states)
+            for t, lo_t, up_t in row:
+                lo[t], up[t] = lo_t, up_t
+            assert np.all(p >= lo - 1e-15) and np.all(p <= up + 1e-15)
+            assert p.sum() == pytest.approx(1.0, abs=1e-12)
+            assert p @ v == pytest.approx(ref_expectation(row, v, minimize), abs=1e-12)
+
+
 def test_row_value_edge_rows():
     # row 0: lower bounds sum to 1 (nothing left to hand out); row 1: a point interval
     # row 2: upper bounds sum to exactly 1 (all successors at their upper bound)
