@@ -89,6 +89,24 @@ def test_adversary_matrix_is_an_optimal_distribution_of_every_row(minimize, zero
             assert p @ v == pytest.approx(ref_expectation(row, v, minimize), abs=1e-12)
 
 
+def test_adversary_matrix_of_edge_rows():
+    # lower bounds summing to 1, a point interval, upper bounds summing to exactly 1
+    m = IMDP(
+        3,
+        [0, 0, 1, 1, 2, 2],
+        [0, 0, 0, 0, 0, 0],
+        [1, 2, 1, 2, 0, 1],
+        [0.25, 0.75, 0.4, 0.6, 0.2, 0.1],
+        [1.0, 1.0, 0.4, 0.6, 0.5, 0.5],
+    )
+    v = np.array([0.3, 0.2, 0.9])
+    for minimize in (True, False):
+        mat = _sweeper(m, minimize).adversary_matrix(v).toarray()
+        assert mat[0] == pytest.approx([0.0, 0.25, 0.75])
+        assert mat[1] == pytest.approx([0.0, 0.4, 0.6])
+        assert mat[2] == pytest.approx([0.5, 0.5, 0.0])
+
+
 def test_row_value_edge_rows():
     # row 0: lower bounds sum to 1 (nothing left to hand out); row 1: a point interval
     # row 2: upper bounds sum to exactly 1 (all successors at their upper bound)
