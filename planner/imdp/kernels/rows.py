@@ -127,19 +127,26 @@ def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_mini
 
 
 @numba.njit(cache=True, nogil=True)
-def row_distributions(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
-    """The adversary's distribution of every row of the layout at ``v``, per entry: the
-    successors with keys below the critical one's (see :func:`threshold_value`) get their
-    upper bounds, those tied with it the rest of ``rem`` in entry order, the others their
-    lower bounds; the same distribution as the ordering adversary's
+def row_distributions(sel, row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
+    """The adversary's distributions at ``v`` of the layout rows ``sel``, in that order, as
+    CSR arrays ``(ptr, successors, probabilities)``: the successors with keys below the
+    critical one's (see :func:`threshold_value`) get their upper bounds, those tied with it
+    the rest of ``rem`` in entry order, the others their lower bounds; the same
+    distribution as the ordering adversary's
     (:class:`planner.imdp.ordering.OrderingAdversary`) up to the order among ties and the
     rounding of the sums, without sorting the rows that still stand. ``crit`` is updated
     where a row's critical successor moved."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
-    prob = np.empty(succ.size)
-    for r in range(row_ptr.size - 1):
+    ptr = np.zeros(sel.size + 1, dtype=np.int64)
+    for i in range(sel.size):
+        ptr[i + 1] = ptr[i] + row_ptr[sel[i] + 1] - row_ptr[sel[i]]
+    out_succ = np.empty(ptr[-1], dtype=np.int64)
+    prob = np.empty(ptr[-1])
+    for j in range(sel.size):
+        r = sel[j]
         a = row_ptr[r]
+        off = ptr[j] - a
         q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
         if q != q:
             sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
@@ -158,8 +165,9 @@ def row_distributions(row_ptr, remaining, succ, lower, gap, crit, v, adversary_m
             elif k == t and left > 0.0:
                 add = gap[i] if gap[i] < left else left
                 left -= add
-            prob[i] = lower[i] + add
-    return prob
+            prob[i + off] = lower[i] + add
+            out_succ[i + off] = succ[i]
+    return ptr, out_succ, prob
 
 
 @numba.njit(cache=True, nogil=True)

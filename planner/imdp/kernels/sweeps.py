@@ -455,7 +455,10 @@ class ReachSweeper:
         successors of the sweeps from below (copied, not moved): near the end of a solve
         the bracket is narrow and they stand at ``u`` too (on the random benchmark model
         all of them, against 72k of 517k rows stale in the lazy passes from above)."""
-        prob = row_distributions(
+        back = np.empty_like(self._position)
+        back[self._position] = np.arange(self._position.size)
+        ptr, succ, prob = row_distributions(
+            back,
             self.row_ptr,
             self.remaining,
             self.succ,
@@ -465,11 +468,7 @@ class ReachSweeper:
             u,
             self.adversary_minimizes,
         )
-        n = self._model.n_states
-        laid = sp.csr_matrix((prob, self.succ, self.row_ptr), shape=(self.rows.size, n))
-        back = np.empty_like(self._position)
-        back[self._position] = np.arange(self._position.size)
-        return laid[back]
+        return sp.csr_matrix((prob, succ, ptr), shape=(self.rows.size, self._model.n_states))
 
     def row_values(self, v: np.ndarray) -> np.ndarray:
         """The robust expectation of ``v`` for every free row, in the order of the
