@@ -15,6 +15,16 @@ def _sweeper(m: IMDP, adversary_minimizes: bool) -> ReachSweeper:
     return ReachSweeper(m, rows, key, True, adversary_minimizes)
 
 
+def _moving_values(rng: np.random.Generator, n: int, steps: int, drift: float):
+    """Value vectors that alternately jump (most stored thresholds break) and drift by
+    ``drift`` (most stand), 30 % of them tied at 0.5 each time."""
+    v = rng.random(n)
+    for step in range(steps):
+        v = v + rng.normal(0.0, drift, n) if step % 2 else rng.random(n)
+        v[rng.random(n) < 0.3] = 0.5
+        yield v
+
+
 @pytest.mark.parametrize("minimize", [True, False])
 @pytest.mark.parametrize("zero_lower", [True, False])
 def test_row_values_match_reference_while_values_change(minimize, zero_lower):
@@ -22,14 +32,7 @@ def test_row_values_match_reference_while_values_change(minimize, zero_lower):
     m = random_imdp(rng, n_states=40, max_succ=7, zero_lower=zero_lower)
     rows = rows_of(m)
     sw = _sweeper(m, minimize)
-    v = rng.random(m.n_states)
-    for step in range(8):
-        # small moves keep most stored thresholds, large ones break them; ties included
-        if step % 2:
-            v = v + rng.normal(0.0, 0.02, m.n_states)
-        else:
-            v = rng.random(m.n_states)
-        v[rng.random(m.n_states) < 0.3] = 0.5
+    for v in _moving_values(rng, m.n_states, 8, 0.02):
         got = sw.row_values(v)
         for r in range(m.n_rows):
             row = rows[(int(m.row_state[r]), int(m.row_action[r]))]
@@ -70,10 +73,7 @@ def test_adversary_matrix_is_an_optimal_distribution_of_every_row(minimize, zero
     free = np.flatnonzero(m.row_state > 0)
     key = np.random.default_rng(1).random(m.n_states)
     sw = ReachSweeper(m, free, key, True, minimize)
-    v = rng.random(m.n_states)
-    for step in range(6):
-        v = v + rng.normal(0.0, 0.05, m.n_states) if step % 2 else rng.random(m.n_states)
-        v[rng.random(m.n_states) < 0.3] = 0.5
+    for v in _moving_values(rng, m.n_states, 6, 0.05):
         sw.sweep(v.copy())  # moves the layout's thresholds, as a solve does
         mat = sw.adversary_matrix(v)
         assert mat.shape == (free.size, m.n_states)
@@ -89,9 +89,11 @@ def test_adversary_matrix_is_an_optimal_distribution_of_every_row(minimize, zero
             assert p @ v == pytest.approx(ref_expectation(row, v, minimize), abs=1e-12)
 
 
-def test_adversary_matrix_of_edge_rows():
-    # lower bounds summing to 1, a point interval, upper bounds summing to exactly 1
-    m = IMDP(
+def _edge_rows() -> IMDP:
+    """Row 0: lower bounds summing to 1 (nothing left to hand out); row 1: a point
+    interval; row 2: upper bounds summing to exactly 1 (all successors at their upper
+    bound)."""
+    return IMDP(
         3,
         [0, 0, 1, 1, 2, 2],
         [0, 0, 0, 0, 0, 0],
@@ -99,6 +101,10 @@ def test_adversary_matrix_of_edge_rows():
         [0.25, 0.75, 0.4, 0.6, 0.2, 0.1],
         [1.0, 1.0, 0.4, 0.6, 0.5, 0.5],
     )
+
+
+def test_adversary_matrix_of_edge_rows():
+    m = _edge_rows()
     v = np.array([0.3, 0.2, 0.9])
     for minimize in (True, False):
         mat = _sweeper(m, minimize).adversary_matrix(v).toarray()
@@ -108,16 +114,7 @@ def test_adversary_matrix_of_edge_rows():
 
 
 def test_row_value_edge_rows():
-    # row 0: lower bounds sum to 1 (nothing left to hand out); row 1: a point interval
-    # row 2: upper bounds sum to exactly 1 (all successors at their upper bound)
-    m = IMDP(
-        3,
-        [0, 0, 1, 1, 2, 2],
-        [0, 0, 0, 0, 0, 0],
-        [1, 2, 1, 2, 0, 1],
-        [0.25, 0.75, 0.4, 0.6, 0.2, 0.1],
-        [1.0, 1.0, 0.4, 0.6, 0.5, 0.5],
-    )
+    m = _edge_rows()
     v = np.array([0.3, 0.2, 0.9])
     rows = rows_of(m)
     for minimize in (True, False):
