@@ -15,40 +15,6 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, nogil=True)
-def _sorted_value(
-    a: int, b: int, remaining: float, succ, lower, gap, v, sign: float, crit, r, idx, keys
-):
-    """The ordering adversary's expectation by sorting the row (an insertion sort into the
-    scratch arrays ``idx``/``keys``); records the row's critical entry in ``crit[r]``."""
-    n = b - a
-    for i in range(n):
-        k = sign * v[succ[a + i]]
-        j = i - 1
-        while j >= 0 and keys[j] > k:
-            keys[j + 1] = keys[j]
-            idx[j + 1] = idx[j]
-            j -= 1
-        keys[j + 1] = k
-        idx[j + 1] = a + i
-    left = remaining
-    q = 0.0
-    c = idx[n - 1]
-    found = False
-    for i in range(n):
-        e = idx[i]
-        add = gap[e] if gap[e] < left else left
-        if add < 0.0:
-            add = 0.0
-        if not found and add < gap[e]:
-            c = e
-            found = True
-        left -= add
-        q += (lower[e] + add) * keys[i]
-    crit[r] = c
-    return sign * q
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit) -> float:
     """The ordering adversary's ``sum_j p_j v[succ_j]`` over the entries
@@ -96,16 +62,41 @@ def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float
 
 @numba.njit(cache=True, nogil=True)
 def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit, idx, keys):
-    """Row ``r``'s value by sorting it (:func:`_sorted_value`), its critical successor
-    recorded for :func:`threshold_value`."""
-    return _sorted_value(
-        row_ptr[r], row_ptr[r + 1], remaining[r], succ, lower, gap, v, sign, crit, r, idx, keys
-    )
+    """Row ``r``'s value by sorting it (an insertion sort into the scratch arrays
+    ``idx``/``keys``), its critical entry recorded in ``crit[r]`` for
+    :func:`threshold_value`."""
+    a = row_ptr[r]
+    n = row_ptr[r + 1] - a
+    for i in range(n):
+        k = sign * v[succ[a + i]]
+        j = i - 1
+        while j >= 0 and keys[j] > k:
+            keys[j + 1] = keys[j]
+            idx[j + 1] = idx[j]
+            j -= 1
+        keys[j + 1] = k
+        idx[j + 1] = a + i
+    left = remaining[r]
+    q = 0.0
+    c = idx[n - 1]
+    found = False
+    for i in range(n):
+        e = idx[i]
+        add = gap[e] if gap[e] < left else left
+        if add < 0.0:
+            add = 0.0
+        if not found and add < gap[e]:
+            c = e
+            found = True
+        left -= add
+        q += (lower[e] + add) * keys[i]
+    crit[r] = c
+    return sign * q
 
 
 @numba.njit(cache=True, nogil=True)
 def scratch(row_ptr):
-    """Scratch arrays for :func:`_sorted_value`, as long as the longest row."""
+    """Scratch arrays for :func:`sorted_value`, as long as the longest row."""
     width = 0
     for r in range(row_ptr.size - 1):
         width = max(width, row_ptr[r + 1] - row_ptr[r])
