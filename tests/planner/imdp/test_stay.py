@@ -163,3 +163,51 @@ def test_shortest_stay_reaches_the_enumerated_minimum(seed):
         shortest_stay(matrix, rs, start, limit=1.001 * _stays(matrix, rs, start).max())[0],
         start,
     )
+
+
+def test_block_stay_bound_of_a_self_loop_is_tight_and_sound():
+    from planner.imdp.stay import block_stay_bound
+
+    p = 1.0 - 1e-3  # expected stay 1 / (1 - p) = 1000
+    sub = sp.csr_matrix([[p]])
+    bound = block_stay_bound(sub, limit=1e6)
+    assert 1000.0 <= bound <= 1100.0
+    # a limit below any block's bound, or below the first block: no bound
+    assert block_stay_bound(sub, limit=999.0) == np.inf
+    assert block_stay_bound(sub, limit=10.0) == np.inf
+    # a closed class never leaves
+    assert block_stay_bound(sp.csr_matrix([[0.5, 0.5], [0.0, 1.0]]), limit=1e12) == np.inf
+    assert block_stay_bound(sp.csr_matrix((0, 0)), limit=1.0) == 0.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_stay_bound_bounds_the_exact_stays(seed):
+    from planner.imdp.stay import block_stay_bound
+
+    rng = np.random.default_rng(200 + seed)
+    n = 40
+    dense = rng.random((n, n)) * (rng.random((n, n)) < 0.15)
+    dense /= dense.sum(axis=1, keepdims=True) + 1e-300
+    leave = rng.random(n) < 0.2  # a fifth of the states leave with 1 %
+    dense[leave] *= 0.99
+    dense[~dense.any(axis=1), 0] = 0.99
+    sub = sp.csr_matrix(dense)
+    live = reaching(sub, 1.0 - dense.sum(axis=1) > 1e-12)
+    assert live.all()
+    exact = np.linalg.solve(np.eye(n) - dense, np.ones(n))
+    bound = block_stay_bound(sub, limit=1e9, max_steps=1 << 16)
+    assert exact.max() <= bound < np.inf
+
+
+def test_shortest_stay_settles_on_the_block_bound_within_the_limit():
+    from planner.imdp.stay import shortest_stay, surest_exit_start
+
+    rng = np.random.default_rng(7)
+    n = 6
+    matrix, rs = _candidates(rng, n, 0)
+    start = surest_exit_start(matrix, rs)
+    exact = _stays(matrix, rs, start)
+    choice, stay = shortest_stay(matrix, rs, start, limit=1e9)
+    # the start already fits: kept, with a bound of its stays
+    assert np.array_equal(choice, start)
+    assert np.all(stay[:n] >= exact) and np.all(stay[:n] <= 1e9) and stay[n] == 0.0
