@@ -31,11 +31,9 @@ inexact ``Y`` was). At most ``_II_REPAIRS`` such repairs, none without
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
+from planner._util.threads import worker
 from planner.imdp import certify, strategy
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.model import IMDP
@@ -118,18 +116,6 @@ _CANDIDATE_SLACK = 1e-13
 ``tol / 100``)."""
 
 
-_POOL: tuple[int, ThreadPoolExecutor] | None = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    """One worker thread for the passes from above, created on first use in each process
-    (a forked child inherits the executor but not its thread)."""
-    global _POOL
-    if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="hopnav-upper"))
-    return _POOL[1]
-
-
 class _IntervalIteration:
     """The state of one interval iteration: ``v`` (lower), ``u`` (upper) and the counts."""
 
@@ -173,7 +159,7 @@ class _IntervalIteration:
         self.it += 1
         full = self.it % FULL_EVERY == 1
         bound = self.cache.copy() if PRUNE and full else None
-        above = _pool().submit(self._from_above)
+        above = worker("upper").submit(self._from_above)
         try:
             for k in range(LOWER_SWEEPS):
                 self.residual = self.sweeper.sweep(self.v, k == 0 and full, bound)

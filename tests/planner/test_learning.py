@@ -10,7 +10,7 @@ from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import PlannerConfig, replan_reward, resynthesise
 from planner.modes import Phase
-from planner.policy import SwitchingConfig, SwitchingPolicy
+from planner.policy import PhasePlan, SwitchingConfig, SwitchingPolicy
 from planner.qlearning import GreedyQ, QLearningConfig, RobustQLearner
 from planner.synthesis import frontier_strategy
 from tests.planner.conftest import smooth_error
@@ -237,3 +237,33 @@ def test_no_reward_is_planned_after_the_run_ends():
     assert sink.any() and not r.q_allowed[sink].any()
     np.testing.assert_allclose(r.q.values[sink], 0.0)
     assert r.q.values[~sink].max() > 0
+
+
+def test_synthesis_on_two_threads_equals_the_steps_one_after_the_other():
+    from planner.imdp import analysis
+    from planner.synthesis import exploration_strategy, exploration_target
+
+    grid, w = _world()
+    empty = np.zeros((0, 2))
+    settings = PlannerConfig(beta=3.0, candidates="nonviolating")
+    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                     initial_cell=9, settings=settings)  # fmt: skip
+    product = r.product
+    sat = analysis.satisfaction(product)
+    np.testing.assert_array_equal(r.satisfaction.lower, sat.lower)
+    np.testing.assert_array_equal(r.satisfaction.upper, sat.upper)
+    np.testing.assert_array_equal(r.satisfaction.strategy, sat.strategy)
+    nonviolating = analysis.nonviolating(product, analysis.failure_states(product))
+    np.testing.assert_array_equal(r.nonviolating.actions, nonviolating.actions)
+    start = int(product.initial)
+    mec = exploration_target(product, nonviolating, settings.candidates, start)
+    assert r.mec is not None and mec is not None and r.mec.index == mec.index
+    plan = PhasePlan.masked(nonviolating.actions, exploration_strategy(product, mec, nonviolating))
+    np.testing.assert_array_equal(r.exploration.ltl_action, plan.ltl_action)
+    assert list(r.synthesis_detail)[:4] == [
+        "satisfaction",
+        "nonviolating",
+        "mec_choice",
+        "steering",
+    ]
+    assert all(t >= 0.0 for t in r.synthesis_detail.values())

@@ -132,7 +132,7 @@ def _interval_solution(seed: int):
 def test_passes_from_above_on_a_thread_give_the_sequential_result(monkeypatch):
     interval = importlib.import_module("planner.imdp.interval")
     threaded = [_interval_solution(s) for s in range(4)]
-    monkeypatch.setattr(interval, "_pool", lambda: _Inline())
+    monkeypatch.setattr(interval, "worker", lambda purpose: _Inline())
     inline = [_interval_solution(s) for s in range(4)]
     for a, b in zip(threaded, inline, strict=True):
         assert a.upper_sweeps > 10  # interval iteration ran its rounds
