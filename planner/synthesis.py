@@ -109,29 +109,6 @@ def synthesise(
     laps = _Laps(clock)
     side = _Laps(clock)
 
-    def safety() -> tuple:
-        side.restart()
-        failure = analysis.failure_states(product)
-        nonviolating = analysis.nonviolating(product, failure)
-        side("nonviolating")
-        mec = exploration_target(product, nonviolating, settings.candidates, start)
-        tour = None
-        if mec is not None:
-            side("mec_choice")
-            tour = ComponentTour(
-                product.model,
-                mec.component,
-                nonviolating.actions,
-                product.base_state,
-                product.reward,
-                uncertainty,
-                settings.tour,
-                aim=aim,
-            )
-        steer = exploration_strategy(product, mec, nonviolating)
-        side("steering")
-        return failure, nonviolating, mec, tour, steer
-
     def satisfaction() -> Solution:
         sat = analysis.satisfaction(product)
         laps("satisfaction")
@@ -140,9 +117,14 @@ def synthesise(
     # steps 2-4 do not read step 1: they run on a second thread meanwhile, sharing the
     # model's reverse index, built here once
     product.model.reverse_index()
-    (failure, nonviolating, mec, tour, steer), sat = concurrently(safety, satisfaction, "synthesis")
+    safe, sat = concurrently(
+        lambda: _safety_steps(product, settings, start, uncertainty, aim, side),
+        satisfaction,
+        "synthesis",
+    )
+    nonviolating = safe.nonviolating
     laps.restart()
-    fallback = fallback_strategy(product, sat, nonviolating, failure)
+    fallback = fallback_strategy(product, sat, nonviolating, safe.failure)
     laps("fallback")
     satisfying = analysis.satisfying(product, settings.p_sat, sat)
     goal = analysis.goal_strategy(product, allowed=satisfying.actions)
@@ -155,9 +137,9 @@ def synthesise(
         satisfaction=sat,
         nonviolating=nonviolating,
         satisfying=satisfying,
-        mec=mec,
-        tour=tour,
-        exploration=PhasePlan.masked(nonviolating.actions, steer),
+        mec=safe.mec,
+        tour=safe.tour,
+        exploration=PhasePlan.masked(nonviolating.actions, safe.steer),
         goal=PhasePlan.masked(satisfying.actions, goal),
         fallback=PhasePlan.masked(product.model.enabled.copy(), fallback),
         q_allowed=q_allowed,
@@ -167,6 +149,50 @@ def synthesise(
         | side.seconds
         | laps.seconds,
     )
+
+
+@dataclass(frozen=True)
+class _Safety:
+    """Steps 2-4 of the module docstring."""
+
+    failure: np.ndarray
+    nonviolating: SubModel
+    mec: MecChoice | None
+    tour: ComponentTour | None
+    steer: np.ndarray
+
+
+def _safety_steps(
+    product: ProductIMDP,
+    settings: PlannerConfig,
+    start: int,
+    uncertainty: np.ndarray,
+    aim: np.ndarray | None,
+    laps: _Laps,
+) -> _Safety:
+    """Failure states, nonviolating sub-model, MEC choice (and its tour), steering; timed
+    by ``laps`` from their start."""
+    laps.restart()
+    failure = analysis.failure_states(product)
+    nonviolating = analysis.nonviolating(product, failure)
+    laps("nonviolating")
+    mec = exploration_target(product, nonviolating, settings.candidates, start)
+    tour = None
+    if mec is not None:
+        laps("mec_choice")
+        tour = ComponentTour(
+            product.model,
+            mec.component,
+            nonviolating.actions,
+            product.base_state,
+            product.reward,
+            uncertainty,
+            settings.tour,
+            aim=aim,
+        )
+    steer = exploration_strategy(product, mec, nonviolating)
+    laps("steering")
+    return _Safety(failure, nonviolating, mec, tour, steer)
 
 
 def exploration_target(
