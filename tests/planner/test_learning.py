@@ -9,7 +9,7 @@ from planner.imdp import IMDP
 from planner.imdp.grid import GridWorld
 from planner.intervals import TruncatedGaussianNoise
 from planner.learning import PlannerConfig, replan_reward, resynthesise
-from planner.modes import Phase
+from planner.modes import Candidates, Phase
 from planner.policy import PhasePlan, SwitchingConfig, SwitchingPolicy
 from planner.qlearning import GreedyQ, QLearningConfig, RobustQLearner
 from planner.synthesis import frontier_strategy
@@ -130,17 +130,20 @@ def test_frontier_strategy_heads_for_the_target_through_the_whole_model():
     assert (frontier_strategy(model, np.zeros(4, bool), allowed) == -1).all()
 
 
-def test_exploration_candidates_setting():
+def _prior_synthesis(candidates: str):
+    """The re-synthesis before any hop, from cell 9 of :func:`_world`."""
     grid, w = _world()
     empty = np.zeros((0, 2))
-    settings = PlannerConfig(beta=3.0, candidates="nonviolating")
-    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                     initial_cell=9, settings=settings)  # fmt: skip
+    settings = PlannerConfig(beta=3.0, candidates=candidates)
+    return resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
+                        initial_cell=9, settings=settings)  # fmt: skip
+
+
+def test_exploration_candidates_setting():
+    r = _prior_synthesis("nonviolating")
     assert r.mec is not None
     assert r.nonviolating.states[r.mec.component.states].all()
-    accepting = PlannerConfig(beta=3.0, candidates="accepting")
-    r2 = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                      initial_cell=9, settings=accepting)  # fmt: skip
+    r2 = _prior_synthesis("accepting")
     assert r2.mec is not None
     assert (r2.product.automaton_state[r2.mec.component.states] == 1).all()  # accepted
     with pytest.raises(PolicyError, match="candidates"):
@@ -243,11 +246,7 @@ def test_synthesis_on_two_threads_equals_the_steps_one_after_the_other():
     from planner.imdp import analysis
     from planner.synthesis import exploration_strategy, exploration_target
 
-    grid, w = _world()
-    empty = np.zeros((0, 2))
-    settings = PlannerConfig(beta=3.0, candidates="nonviolating")
-    r = resynthesise(LandingErrorGP(), grid, until_automaton(), empty, empty, reward=w,
-                     initial_cell=9, settings=settings)  # fmt: skip
+    r = _prior_synthesis("nonviolating")
     product = r.product
     sat = analysis.satisfaction(product)
     np.testing.assert_array_equal(r.satisfaction.lower, sat.lower)
@@ -256,7 +255,7 @@ def test_synthesis_on_two_threads_equals_the_steps_one_after_the_other():
     nonviolating = analysis.nonviolating(product, analysis.failure_states(product))
     np.testing.assert_array_equal(r.nonviolating.actions, nonviolating.actions)
     start = int(product.initial)
-    mec = exploration_target(product, nonviolating, settings.candidates, start)
+    mec = exploration_target(product, nonviolating, Candidates.NONVIOLATING, start)
     assert r.mec is not None and mec is not None and r.mec.index == mec.index
     plan = PhasePlan.masked(nonviolating.actions, exploration_strategy(product, mec, nonviolating))
     np.testing.assert_array_equal(r.exploration.ltl_action, plan.ltl_action)
