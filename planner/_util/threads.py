@@ -25,6 +25,15 @@ _WORKERS: dict[str, tuple[int, ThreadPoolExecutor]] = {}
 _LOCK = threading.Lock()
 
 
+def _new_lock_in_child() -> None:
+    # a fork while another thread held the lock would leave the child's copy held for ever
+    global _LOCK
+    _LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_new_lock_in_child)
+
+
 def worker(purpose: str) -> ThreadPoolExecutor:
     """The single worker thread of ``purpose`` in this process, created on first use (a
     forked child inherits the executor but not its thread, so it gets its own)."""

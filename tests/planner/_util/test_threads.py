@@ -64,3 +64,20 @@ def test_a_foreground_error_waits_for_the_background_and_a_background_error_is_r
 def test_one_worker_per_purpose():
     assert worker("test") is worker("test")
     assert worker("test") is not worker("other test")
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
+def test_a_forked_child_gets_its_own_worker():
+    import multiprocessing
+
+    parent = worker("test")
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(1) as pool:
+        child_thread, same = pool.apply(_child_worker_check, (id(parent),))
+    assert same is False
+    assert child_thread != threading.get_ident()
+
+
+def _child_worker_check(parent_id: int) -> tuple[int, bool]:
+    (tid, _), _ = concurrently(lambda: (threading.get_ident(), 1), lambda: 2, "test")
+    return tid, id(worker("test")) == parent_id
