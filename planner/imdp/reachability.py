@@ -398,7 +398,12 @@ def rounding_widened(
         if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
             room = widening_room(lower[st], upper[st], tolerance)
             limit = stay_limit(matrix[near], upper, ROUNDING, room)
-            pick, stay = shortest_stay(matrix[near], crs, pick, limit=limit)
+            # an open bracket's room is a tenth of its width: there the stays are solved
+            # for, not bounded, so that the widening stays as small as they are
+            closing = float(np.max(upper[st] - lower[st])) < tolerance
+            pick, stay = shortest_stay(
+                matrix[near], crs, pick, limit=limit, block_limit=limit if closing else 0.0
+            )
         chosen = near[pick]
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)

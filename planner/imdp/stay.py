@@ -182,6 +182,7 @@ def shortest_stay(
     start: np.ndarray,
     rounds: int = 50,
     limit: float = 0.0,
+    block_limit: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Per state one of the candidate rows (``matrix``: one distribution per candidate,
     over all states; ``row_states`` their states, sorted, at least one per state), chosen
@@ -190,12 +191,13 @@ def shortest_stay(
     :func:`surest_exit_start` gives a good one), ``rounds`` evaluations at most, until no
     state improves or every stay of a leaving state is at most ``limit`` (short enough:
     :func:`stay_limit`); a state whose chain never leaves counts as staying for ever.
-    Each round first tries :func:`block_stay_bound` against ``limit`` (no factorisation),
-    then a sparse LU. Returns ``(choice, stay)``: candidate indices, one per state (each
-    improvement only shortens the stays), and the expected stay of that choice per state
-    (``(n_states,)``, ``1e300`` where it never leaves, 0 off these states; where the block
-    bound settled it, that bound, at most ``limit``, at every leaving state), or ``None``
-    when the last round changed the choice without evaluating it."""
+    Each round first tries :func:`block_stay_bound` against ``block_limit`` (default:
+    ``limit``; 0: never), which needs no factorisation, then a sparse LU. Returns
+    ``(choice, stay)``: candidate indices, one per state (each improvement only shortens
+    the stays), and the expected stay of that choice per state (``(n_states,)``, ``1e300``
+    where it never leaves, 0 off these states; where the block bound settled it, that
+    bound, at most ``block_limit``, at every leaving state), or ``None`` when the last
+    round changed the choice without evaluating it."""
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
@@ -215,8 +217,9 @@ def shortest_stay(
         idx = np.flatnonzero(live)
         if idx.size:
             chain = sub[idx][:, idx]
-            bound = block_stay_bound(chain.tocsr(), limit)
-            if bound <= limit:
+            most = limit if block_limit is None else block_limit
+            bound = block_stay_bound(chain.tocsr(), most)
+            if bound <= most:
                 w[idx] = bound
                 return evaluated(w)
             w[idx] = chain_lu(chain).solve(np.ones(idx.size))

@@ -211,3 +211,7 @@ def test_shortest_stay_settles_on_the_block_bound_within_the_limit():
     # the start already fits: kept, with a bound of its stays
     assert np.array_equal(choice, start)
     assert np.all(stay[:n] >= exact) and np.all(stay[:n] <= 1e9) and stay[n] == 0.0
+    # without the block bound: the stays themselves, by LU
+    choice, stay = shortest_stay(matrix, rs, start, limit=1e9, block_limit=0.0)
+    assert np.array_equal(choice, start)
+    np.testing.assert_allclose(stay[:n], exact, rtol=1e-10)
