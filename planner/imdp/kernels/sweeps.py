@@ -309,8 +309,9 @@ class ReachSweeper:
         lens = m.row_ptr[rows + 1] - m.row_ptr[rows]
         self.row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
         self.remaining = 1.0 - m.row_lower_sum[rows]
-        self.succ = m.successor[ent].astype(np.int64)
-        self.lower = m.lower[ent].astype(np.float64)
+        # gathered once (``astype`` copied the 4.3M entries of the benchmark grid again)
+        self.succ = np.asarray(m.successor[ent], dtype=np.int64)
+        self.lower = np.asarray(m.lower[ent], dtype=np.float64)
         self.gap = m.upper[ent] - self.lower
         self.crit = self.row_ptr[:-1].copy()
         self.crit_up = self.crit.copy()
