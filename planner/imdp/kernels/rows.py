@@ -187,6 +187,35 @@ def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
 
 
 @numba.njit(cache=True, nogil=True)
+def patch_rows(sel, old, row_ptr, remaining, succ, lower, gap, crit, light) -> int:
+    """:func:`gather_rows` of the rows ``sel`` into ``light``, the layout gathered for the
+    rows ``old``, in place: only the slots whose row changed are copied (the critical
+    successors of every slot are taken anew, as a fresh gather does), and ``old`` becomes
+    ``sel``. Returns the number of slots copied, or -1, with nothing changed, when a changed
+    row's length differs from its slot's (the layout must then be gathered anew)."""
+    new_ptr, rem2, succ2, lower2, gap2, crit2 = light
+    for i in range(sel.size):
+        r = sel[i]
+        if r != old[i] and row_ptr[r + 1] - row_ptr[r] != new_ptr[i + 1] - new_ptr[i]:
+            return -1
+    n = 0
+    for i in range(sel.size):
+        r = sel[i]
+        off = new_ptr[i] - row_ptr[r]
+        crit2[i] = crit[r] + off
+        if r == old[i]:
+            continue
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            succ2[e + off] = succ[e]
+            lower2[e + off] = lower[e]
+            gap2[e + off] = gap[e]
+        rem2[i] = remaining[r]
+        old[i] = r
+        n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
 def order_rows(todo, row_ptr, successor, lower, upper, remaining, keys, perm, prob, succ):
     """The ordering adversary's distribution of each row ``r`` in ``todo``, in place.
 

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from planner.imdp.kernels.rows import (
     all_row_values,
     gather_rows,
+    patch_rows,
     row_distributions,
     scratch,
     sorted_value,
@@ -348,7 +349,20 @@ class ReachSweeper:
                 self.adversary_minimizes,
                 self._no_cache if bound is None else bound,
             )
-            if self._light is None or not np.array_equal(self.best_row, self._light_rows):
+            if self._light is None or (
+                patch_rows(
+                    self.best_row,
+                    self._light_rows,
+                    self.row_ptr,
+                    self.remaining,
+                    self.succ,
+                    self.lower,
+                    self.gap,
+                    self.crit,
+                    self._light,
+                )
+                < 0
+            ):
                 self._light_rows = self.best_row.copy()
                 self._light = gather_rows(
                     self.best_row,

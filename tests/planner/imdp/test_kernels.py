@@ -312,3 +312,43 @@ def test_full_sweeps_skip_rows_bounded_below_the_best_and_nothing_else_changes(s
     pruned.sweep(c, True, bound=low)
     np.testing.assert_array_equal(pruned.best_row, pruned.state_rows[:-1])
     assert (pruned.best_row != plain.best_row).any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_patched_light_layout_equals_a_fresh_gather(seed):
+    from planner.imdp.kernels.rows import gather_rows, patch_rows
+
+    rng = np.random.default_rng(300 + seed)
+    m = random_imdp(rng, 40, 3, 4)
+    sw = _sweeper(m, True)
+    layout = (sw.row_ptr, sw.remaining, sw.succ, sw.lower, sw.gap)
+    lens = np.diff(sw.row_ptr)
+    first = sw.state_rows[:-1].copy()
+    light = gather_rows(first, *layout, sw.crit)
+    old = first.copy()
+    patched_any = refreshed = 0
+    for step in range(8):
+        sw.crit = sw.row_ptr[:-1] + rng.integers(0, lens)  # other critical successors
+        sel = old.copy()
+        for k in np.flatnonzero(rng.random(sel.size) < 0.4):
+            rows = np.arange(sw.state_rows[k], sw.state_rows[k + 1])
+            if step % 2 == 0:  # even steps keep each slot's length
+                rows = rows[lens[rows] == lens[old[k]]]
+            sel[k] = rng.choice(rows)
+        before = tuple(a.copy() for a in light)
+        prev = old.copy()
+        n = patch_rows(sel, old, *layout, sw.crit, light)
+        if n < 0:
+            # a changed row of another length: nothing touched, a fresh gather is needed
+            assert np.array_equal(old, prev)
+            refreshed += 1
+            assert all(np.array_equal(a, b) for a, b in zip(light, before, strict=True))
+            light = gather_rows(sel, *layout, sw.crit)
+            old = sel.copy()
+            continue
+        patched_any += n
+        assert np.array_equal(old, sel) and n == int((sel != prev).sum())
+        fresh = gather_rows(sel, *layout, sw.crit)
+        for a, b in zip(light, fresh, strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert patched_any > 0 and refreshed > 0
