@@ -349,30 +349,13 @@ class ReachSweeper:
                 self.adversary_minimizes,
                 self._no_cache if bound is None else bound,
             )
-            if self._light is None or (
-                patch_rows(
-                    self.best_row,
-                    self._light_rows,
-                    self.row_ptr,
-                    self.remaining,
-                    self.succ,
-                    self.lower,
-                    self.gap,
-                    self.crit,
-                    self._light,
-                )
-                < 0
+            layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
+            if (
+                self._light is None
+                or patch_rows(self.best_row, self._light_rows, *layout, self._light) < 0
             ):
                 self._light_rows = self.best_row.copy()
-                self._light = gather_rows(
-                    self.best_row,
-                    self.row_ptr,
-                    self.remaining,
-                    self.succ,
-                    self.lower,
-                    self.gap,
-                    self.crit,
-                )
+                self._light = gather_rows(self.best_row, *layout)
             return float(residual)
         row_ptr, remaining, succ, lower, gap, crit = self._light
         return float(
