@@ -143,7 +143,7 @@ _BLOCK_FIRST = 32
 _BLOCK_STEPS = 512
 """Steps after which :func:`block_stay_bound` gives up: 512 sparse products cost about one
 sparse LU of the chains of the 100 x 100 benchmark grid (0.06-0.09 s); their stays fit
-the widening's room after 256 steps (seeds 0-5)."""
+the widening's room after 256 steps (seeds 0-3 measured)."""
 
 
 def block_stay_bound(sub: sp.csr_matrix, limit: float, max_steps: int = _BLOCK_STEPS) -> float:
