@@ -11,7 +11,10 @@ from __future__ import annotations
 import json
 import os
 import re
+import tempfile
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -45,11 +48,17 @@ def _read(path: Path) -> tuple[list, Any, bool]:
 
     if not path.is_file():
         raise RecordingError(f"no recording at {path}: file not found")
-    check_rrd(path)  # rerun's decoder aborts the process on some corrupt payloads
+    end = check_rrd(path)  # rerun's decoder aborts the process on some corrupt payloads
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), tempfile.TemporaryDirectory() as tmp:
             warnings.simplefilter("ignore")  # rerun warns about footer-less (legacy) files
-            reader = RrdReader(path)
+            source = path
+            if end < path.stat().st_size:
+                # rerun would find the chunks through the footer manifest, which
+                # check_rrd cannot vouch for: it gets the checked messages alone
+                source = Path(tmp) / "checked.rrd"
+                _copy_prefix(path, source, end)
+            reader = RrdReader(source)
             stores = reader.recordings()
             if not stores:
                 raise RecordingError(f"{path} holds no rerun recording")
@@ -60,6 +69,32 @@ def _read(path: Path) -> tuple[list, Any, bool]:
     except (RuntimeError, ValueError, OSError) as err:
         raise RecordingError(f"{path} is not a readable rerun recording: {err}") from err
     return chunks, stores[0], has_blueprint
+
+
+@contextmanager
+def _content_errors(path: Path) -> Iterator[None]:
+    """A recording that rerun decodes but whose content is not what hopnav wrote (a column
+    missing or of another type: a corrupt or foreign file) raises :class:`RecordingError`
+    naming the file, not the ``KeyError`` or ``TypeError`` of the code reading it."""
+    try:
+        yield
+    except RecordingError:
+        raise
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
+        raise RecordingError(
+            f"{path}: not a recording as hopnav writes it ({type(err).__name__}: {err})"
+        ) from err
+
+
+def _copy_prefix(path: Path, to: Path, size: int) -> None:
+    """The first ``size`` bytes of ``path`` into ``to``, a megabyte at a time."""
+    with path.open("rb") as src, to.open("wb") as dst:
+        while size > 0:
+            block = src.read(min(size, 1 << 20))
+            if not block:
+                break
+            dst.write(block)
+            size -= len(block)
 
 
 def _data_rows(chunk) -> tuple[list[dict[str, Any]], Any]:
@@ -92,6 +127,12 @@ def summarize_recording(path: str | os.PathLike[str]) -> dict[str, Any]:
     """
     path = Path(path)
     chunks, store, has_blueprint = _read(path)
+    with _content_errors(path):
+        return _summarize(path, chunks, store, has_blueprint)
+
+
+def _summarize(path: Path, chunks: list, store: Any, has_blueprint: bool) -> dict[str, Any]:
+    """:func:`summarize_recording` on the decoded chunks."""
     entities: set[str] = set()
     timelines: set[str] = set()
     runs: dict[int, dict[str, Any]] = {}
@@ -232,12 +273,18 @@ def read_runs(path: str | os.PathLike[str]) -> tuple[Scenario, list[RecordedRun]
         RecordingError: the file is unreadable, or it holds no scenario (``world/scenario``;
             recordings of older versions lack it).
     """
+    path = Path(path)
+    chunks, _, _ = _read(path)
+    with _content_errors(path):
+        return _runs(path, chunks)
+
+
+def _runs(path: Path, chunks: list) -> tuple[Scenario, list[RecordedRun]]:
+    """:func:`read_runs` on the decoded chunks."""
     from hopper_sim.viz.figures import Route
     from planner.errors import ScenarioError
     from planner.scenario import scenario_from_dict
 
-    path = Path(path)
-    chunks, _, _ = _read(path)
     scenario_json = None
     hops: dict[int, list[tuple[dict[str, Any], float]]] = {}
     arcs: dict[int, dict[int, np.ndarray]] = {}

@@ -41,17 +41,23 @@ MAX_RATIO = 255
 """LZ4's largest compression ratio: a declared uncompressed size beyond it is corrupt."""
 
 
-def check_rrd(path: Path) -> None:
+def check_rrd(path: Path) -> int:
     """Raise :class:`RecordingError` (with the byte offset) if the framing of ``path`` or
-    one of its Arrow payloads is corrupt; return quietly otherwise."""
+    one of its Arrow payloads is corrupt; else return where the checked messages end: the
+    byte offset of the end-of-stream message, or the file size where there is none.
+
+    The end-of-stream message carries the footer manifest (an index of every chunk by byte
+    offset), which is not checked: a reader hands rerun only the bytes before it, which
+    rerun reads as a footer-less file (:func:`hopper_sim.viz.recording_reader.summarize_recording`).
+    """
     with path.open("rb") as f:
         if path.stat().st_size < _HEADER or f.read(4) != MAGIC:
             raise RecordingError(f"{path} is not a readable rerun recording: no RRF2 header")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            _check_messages(path, data)
+            return _check_messages(path, data)
 
 
-def _check_messages(path: Path, data: mmap.mmap) -> None:
+def _check_messages(path: Path, data: mmap.mmap) -> int:
     pos, index = _HEADER, 0
     while pos < len(data):
         if pos + _FRAME.size > len(data):
@@ -74,8 +80,9 @@ def _check_messages(path: Path, data: mmap.mmap) -> None:
                     f"{path}: Arrow message {index} at byte {pos} is corrupt: {err}"
                 ) from None
         if kind == _END:
-            return  # the rest is the footer manifest and its trailer
+            return pos  # the rest is the footer manifest and its trailer
         pos, index = start + length, index + 1
+    return len(data)
 
 
 def _check_arrow_msg(body: bytes) -> None:

@@ -221,6 +221,25 @@ def test_bad_files_raise_recording_error(tmp_path: Path, recorded):
         RerunRecorder(tmp_path / "no" / "such.rrd")
 
 
+class _ForeignChunk:
+    """A chunk that rerun decodes but hopnav did not write: a route without its columns."""
+
+    entity_path = "/run_1/route"
+
+    def to_record_batch(self):
+        return pa.record_batch({"x": pa.array([1.0])})
+
+
+def test_decodable_but_foreign_content_raises_recording_error(tmp_path: Path, monkeypatch):
+    # found by the reader fuzz test: a bit flip in a column name left read_runs with a
+    # KeyError from pyarrow
+    import hopper_sim.viz.recording_reader as reader
+
+    monkeypatch.setattr(reader, "_read", lambda path: ([_ForeignChunk()], None, False))
+    with pytest.raises(RecordingError, match=r"r\.rrd: not a recording as hopnav writes it"):
+        read_runs(tmp_path / "r.rrd")
+
+
 @pytest.mark.parametrize("flush_every", [1, 2, 100])
 def test_buffered_hops_are_written_in_order(tmp_path: Path, flush_every: int):
     path = tmp_path / "r.rrd"

@@ -181,6 +181,26 @@ def test_a_footerless_recording_reads_back(tmp_path, rrd):
     assert [r["hops"] for r in summarize_recording(path)["runs"]] == [2]
 
 
+def test_check_rrd_ends_at_the_end_of_stream(tmp_path, rrd):
+    end = next(o for o, k, _ in _frames(rrd) if k == 0)
+    assert check_rrd(_write(tmp_path, rrd)) == end
+    assert check_rrd(_write(tmp_path, _footerless(rrd))) == end
+
+
+def test_the_footer_manifest_is_not_trusted(tmp_path, rrd):
+    # the footer indexes every chunk by byte offset and check_rrd does not check it: the
+    # readers hand rerun only the checked messages, so even a garbled footer reads back
+    # the same runs (with rerun trusting it, a corrupt offset is a decode of whatever it
+    # points at)
+    end = next(o for o, k, _ in _frames(rrd) if k == 0)
+    body = end + 16
+    garbled = rrd[:body] + bytes(b ^ 0x5A for b in rrd[body:-12]) + rrd[-12:]
+    assert len(garbled) == len(rrd)
+    path = _write(tmp_path, garbled)
+    assert check_rrd(path) == end
+    assert summarize_recording(path)["runs"] == summarize_recording(_write(tmp_path, rrd))["runs"]
+
+
 def test_an_intact_rebuilt_message_still_reads(tmp_path, rrd):
     # the rebuilding itself keeps a valid file valid (the corruption is the only change)
     offset, fields, raw = _record_batch_message(rrd)
