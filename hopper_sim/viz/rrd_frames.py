@@ -116,9 +116,47 @@ def _check_arrow_msg(body: bytes) -> None:
     try:
         for message in ipc.MessageReader.open_stream(raw):
             _check_buffers(message.metadata.to_pybytes(), message.body.size if message.body else 0)
-        ipc.open_stream(raw).read_all().validate(full=True)
+        table = ipc.open_stream(raw).read_all()
+        table.validate(full=True)
+        for column in table.columns:
+            for chunk in column.chunks:
+                _check_widths(chunk)
     except (pa.ArrowException, ValueError, OSError, struct.error) as err:
         raise ValueError(f"Arrow IPC payload: {err}") from None
+
+
+def _check_widths(array) -> None:
+    """Every buffer of typed values (offsets, numbers, fixed-size binary) of ``array`` and
+    its children holds a whole number of values. pyarrow reads a 13-byte offsets buffer of
+    a list of one element (it needs 8 bytes); Arrow's Rust reader views the buffer as
+    ``i32`` values and panics on the odd 5 bytes, aborting the process."""
+    import pyarrow as pa
+
+    kind = array.type
+    buffers = array.buffers()
+    width = 0
+    if pa.types.is_large_list(kind) or pa.types.is_large_string(kind):
+        width = 8
+    elif pa.types.is_large_binary(kind):
+        width = 8
+    elif pa.types.is_list(kind) or pa.types.is_map(kind):
+        width = 4
+    elif pa.types.is_string(kind) or pa.types.is_binary(kind):
+        width = 4
+    elif pa.types.is_fixed_size_binary(kind):
+        width = kind.byte_width
+    elif pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_temporal(kind):
+        width = kind.bit_width // 8
+    if width and len(buffers) > 1 and buffers[1] is not None and buffers[1].size % width:
+        raise ValueError(
+            f"a {kind} buffer of {buffers[1].size} bytes is not a whole number of "
+            f"{width}-byte values"
+        )
+    if pa.types.is_list(kind) or pa.types.is_large_list(kind) or pa.types.is_fixed_size_list(kind):
+        _check_widths(array.values)
+    elif pa.types.is_struct(kind):
+        for i in range(kind.num_fields):
+            _check_widths(array.field(i))
 
 
 _RECORD_BATCH, _DICTIONARY_BATCH = 3, 4

@@ -116,11 +116,26 @@ def _with_buffer_length(raw: bytes, buffer: int, length: int) -> bytes:
     return bytes(out)
 
 
-def _corrupt_buffer(data: bytes, length: int) -> bytes:
+def _corrupt_buffer(data: bytes, length: int, buffer: int = 0) -> bytes:
     offset, fields, raw = _record_batch_message(data)
-    bad = pa.compress(_with_buffer_length(raw, 0, length), codec="lz4_raw", asbytes=True)
+    bad = pa.compress(_with_buffer_length(raw, buffer, length), codec="lz4_raw", asbytes=True)
     fields = [(n, w, bad if n == 5 else v) for n, w, v in fields]
     return _with_message(data, offset, 2, _encode(fields))
+
+
+def _read_back_in_a_child(path: Path) -> list[str]:
+    """What the readers say of ``path``, run in a child process (an abort stays there)."""
+    root = Path(__file__).resolve().parents[3]
+    child = subprocess.run(
+        [sys.executable, "-c", _READ_BACK, str(path)],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        timeout=120,
+    )
+    assert child.returncode == 0, child.stderr[-2000:]
+    return child.stdout.strip().splitlines()
 
 
 def _write(tmp_path: Path, data: bytes) -> Path:
@@ -161,18 +176,30 @@ def test_a_buffer_past_the_body_is_an_error_not_an_abort(tmp_path, rrd):
     path = _write(tmp_path, _corrupt_buffer(_footerless(rrd), 2**62))
     with pytest.raises(RecordingError, match=r"Arrow message \d+ at byte \d+ .*buffer 0"):
         check_rrd(path)
-    root = Path(__file__).resolve().parents[3]
-    child = subprocess.run(
-        [sys.executable, "-c", _READ_BACK, str(path)],
-        capture_output=True,
-        text=True,
-        cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
-        timeout=120,
-    )
-    assert child.returncode == 0, child.stderr[-2000:]
-    lines = child.stdout.strip().splitlines()
+    lines = _read_back_in_a_child(path)
     assert len(lines) == 2 and all("buffer 0" in line for line in lines)
+
+
+def test_an_offsets_buffer_with_a_partial_value_is_an_error_not_an_abort(tmp_path, rrd):
+    # found by the reader fuzz test: a bit flip made a list's offsets buffer 13 bytes
+    # long; pyarrow reads and validates it (8 bytes are needed), Arrow's Rust reader views
+    # it as i32 values and panics on the 5 odd bytes (SIGABRT)
+    _, _, raw = _record_batch_message(rrd)
+    batch = pa.ipc.open_stream(raw).read_next_batch()
+    index = 0
+    for column in batch.columns:
+        if pa.types.is_list(column.type):
+            target, size = index + 1, column.buffers()[1].size
+            break
+        index += len(column.buffers())
+    data = _footerless(_corrupt_buffer(rrd, size + 1, target))
+    path = _write(tmp_path, data)
+    _, _, bad = _record_batch_message(data)
+    pa.ipc.open_stream(bad).read_all().validate(full=True)  # pyarrow alone accepts it
+    with pytest.raises(RecordingError, match=r"of \d+ bytes is not a whole number of 4-byte"):
+        check_rrd(path)
+    lines = _read_back_in_a_child(path)
+    assert len(lines) == 2 and all("4-byte values" in line for line in lines)
 
 
 def test_a_footerless_recording_reads_back(tmp_path, rrd):
