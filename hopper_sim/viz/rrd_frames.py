@@ -115,7 +115,9 @@ def _check_arrow_msg(body: bytes) -> None:
         raise ValueError(f"unknown compression {compression}")
     try:
         for message in ipc.MessageReader.open_stream(raw):
-            _check_buffers(message.metadata.to_pybytes(), message.body.size if message.body else 0)
+            meta = message.metadata.to_pybytes()
+            _check_schema(meta)
+            _check_buffers(meta, message.body.size if message.body else 0)
         table = ipc.open_stream(raw).read_all()
         table.validate(full=True)
         for column in table.columns:
@@ -159,8 +161,84 @@ def _check_widths(array) -> None:
             _check_widths(array.field(i))
 
 
-_RECORD_BATCH, _DICTIONARY_BATCH = 3, 4
+_SCHEMA, _DICTIONARY_BATCH, _RECORD_BATCH = 1, 2, 3
 """``MessageHeader`` union types of Arrow's ``Message.fbs``."""
+
+_INT, _FLOAT, _DECIMAL, _DATE, _TIME, _TIMESTAMP, _INTERVAL = 2, 3, 7, 8, 9, 10, 11
+_LIST, _FIXED_LIST, _MAP, _DURATION, _LARGE_LIST = 12, 16, 17, 18, 21
+_LAST_TYPE = 26
+"""``Type`` union members of Arrow's ``Schema.fbs`` whose parameters Arrow's Rust reader
+checks by panicking, and the last member."""
+
+_MAX_DEPTH = 64
+"""Nesting of fields beyond which a schema is refused."""
+
+
+def _check_schema(meta: bytes) -> None:
+    """Every field of a schema message has a known type whose parameters Arrow's Rust
+    reader accepts (it panics on the rest, e.g. a timestamp unit of -1, which pyarrow read):
+    integer widths 8-64, float precisions, date, time, timestamp, interval and duration
+    units, decimal widths, one child for lists and maps, the type table present where it
+    has parameters. Reads ``Schema`` (``fields`` field 1) and each ``Field`` (``type_type``
+    2, ``type`` 3, ``children`` 5)."""
+    root = _u32(meta, 0)
+    kind = _field(meta, root, 1)
+    header = _field(meta, root, 2)
+    if kind is None or header is None or meta[kind] != _SCHEMA:
+        return
+    _check_fields(meta, header + _u32(meta, header), 1, 0)
+
+
+def _vector(meta: bytes, table: int, number: int) -> list[int]:
+    """Positions of the tables in the vector field ``number`` of ``table``."""
+    at = _field(meta, table, number)
+    if at is None:
+        return []
+    vec = at + _u32(meta, at)
+    return [vec + 4 + 4 * i + _u32(meta, vec + 4 + 4 * i) for i in range(_u32(meta, vec))]
+
+
+def _scalar(meta: bytes, table: int | None, number: int, fmt: str, default: int) -> int:
+    at = None if table is None else _field(meta, table, number)
+    return default if at is None else struct.unpack_from(fmt, meta, at)[0]
+
+
+def _check_fields(meta: bytes, table: int, number: int, depth: int) -> None:
+    if depth > _MAX_DEPTH:
+        raise ValueError(f"fields nested more than {_MAX_DEPTH} deep")
+    for field in _vector(meta, table, number):
+        _check_type(meta, field)
+        _check_fields(meta, field, 5, depth + 1)
+
+
+def _check_type(meta: bytes, field: int) -> None:
+    tag = _scalar(meta, field, 2, "<B", 0)
+    at = _field(meta, field, 3)
+    kind = None if at is None else at + _u32(meta, at)
+    if not 1 <= tag <= _LAST_TYPE:
+        raise ValueError(f"a field of unknown type {tag}")
+    unit = _scalar(meta, kind, 0, "<h", 1 if tag in (_DATE, _TIME, _DURATION) else 0)
+    if tag == _INT:
+        ok = _scalar(meta, kind, 0, "<i", 0) in (8, 16, 32, 64)
+    elif tag == _FLOAT:
+        ok = unit in (0, 1, 2)
+    elif tag == _DECIMAL:
+        ok = _scalar(meta, kind, 2, "<i", 128) in (32, 64, 128, 256)
+    elif tag == _DATE:
+        ok = unit in (0, 1)
+    elif tag == _TIME:
+        ok = (_scalar(meta, kind, 1, "<i", 32), unit) in ((32, 0), (32, 1), (64, 2), (64, 3))
+    elif tag in (_TIMESTAMP, _DURATION):
+        ok = unit in (0, 1, 2, 3)
+    elif tag == _INTERVAL:
+        ok = unit in (0, 1, 2)
+    elif tag in (_LIST, _FIXED_LIST, _MAP, _LARGE_LIST):
+        ok = len(_vector(meta, field, 5)) == 1
+    else:
+        ok = True
+    needs_table = tag in (_INT, _FLOAT, _DECIMAL, _DATE, _TIME, _TIMESTAMP, _INTERVAL)
+    if not ok or (needs_table and kind is None):
+        raise ValueError(f"a field of type {tag} with parameters Arrow does not support")
 
 
 def _check_buffers(meta: bytes, body_size: int) -> None:

@@ -202,6 +202,50 @@ def test_an_offsets_buffer_with_a_partial_value_is_an_error_not_an_abort(tmp_pat
     assert len(lines) == 2 and all("4-byte values" in line for line in lines)
 
 
+def _time_unit_position(raw: bytes) -> int | None:
+    """Position in an IPC stream of the stored unit of its schema's first timestamp or
+    duration field, or ``None``."""
+    from hopper_sim.viz.rrd_frames import _field, _u32, _vector
+
+    meta = 8  # the schema's flatbuffer, after its continuation marker and length
+    root = meta + _u32(raw, meta)
+    header = _field(raw, root, 2)
+    schema = header + _u32(raw, header)
+    for field in _vector(raw, schema, 1):
+        tag = _field(raw, field, 2)
+        kind = _field(raw, field, 3)
+        if tag is not None and raw[tag] in (10, 18) and kind is not None:
+            unit = _field(raw, kind + _u32(raw, kind), 0)
+            if unit is not None:
+                return unit
+    return None
+
+
+def _arrow_messages(data: bytes):
+    """``(offset, protobuf fields, IPC stream, time unit position)`` of each Arrow message."""
+    for offset, kind, body in _frames(data):
+        if kind == 2:
+            fields = _proto(body)
+            f = {n: v for n, _, v in fields}
+            raw = pa.decompress(f[5], decompressed_size=f[3], codec="lz4_raw", asbytes=True)
+            yield offset, fields, raw, _time_unit_position(raw)
+
+
+def test_an_unknown_time_unit_is_an_error_not_an_abort(tmp_path, rrd):
+    # found by the reader fuzz test: a bit flip made a timestamp's unit -1; pyarrow read
+    # the schema, Arrow's Rust reader panics on the unit (SIGABRT)
+    offset, fields, raw, at = next(m for m in _arrow_messages(rrd) if m[3] is not None)
+    bad = bytearray(raw)
+    struct.pack_into("<h", bad, at, -1)
+    packed = pa.compress(bytes(bad), codec="lz4_raw", asbytes=True)
+    fields = [(n, w, packed if n == 5 else v) for n, w, v in fields]
+    path = _write(tmp_path, _footerless(_with_message(rrd, offset, 2, _encode(fields))))
+    with pytest.raises(RecordingError, match=r"type 1[08] with parameters Arrow does not"):
+        check_rrd(path)
+    lines = _read_back_in_a_child(path)
+    assert len(lines) == 2 and all("Arrow does not support" in line for line in lines)
+
+
 def test_a_footerless_recording_reads_back(tmp_path, rrd):
     path = _write(tmp_path, _footerless(rrd))
     check_rrd(path)
