@@ -137,26 +137,23 @@ def _check_widths(array) -> None:
     kind = array.type
     buffers = array.buffers()
     width = 0
-    if pa.types.is_large_list(kind) or pa.types.is_large_string(kind):
+    t = pa.types
+    if t.is_large_list(kind) or t.is_large_string(kind) or t.is_large_binary(kind):
         width = 8
-    elif pa.types.is_large_binary(kind):
-        width = 8
-    elif pa.types.is_list(kind) or pa.types.is_map(kind):
+    elif t.is_list(kind) or t.is_map(kind) or t.is_string(kind) or t.is_binary(kind):
         width = 4
-    elif pa.types.is_string(kind) or pa.types.is_binary(kind):
-        width = 4
-    elif pa.types.is_fixed_size_binary(kind):
+    elif t.is_fixed_size_binary(kind):
         width = kind.byte_width
-    elif pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_temporal(kind):
+    elif t.is_integer(kind) or t.is_floating(kind) or t.is_temporal(kind):
         width = kind.bit_width // 8
     if width and len(buffers) > 1 and buffers[1] is not None and buffers[1].size % width:
         raise ValueError(
             f"a {kind} buffer of {buffers[1].size} bytes is not a whole number of "
             f"{width}-byte values"
         )
-    if pa.types.is_list(kind) or pa.types.is_large_list(kind) or pa.types.is_fixed_size_list(kind):
+    if t.is_list(kind) or t.is_large_list(kind) or t.is_fixed_size_list(kind):
         _check_widths(array.values)
-    elif pa.types.is_struct(kind):
+    elif t.is_struct(kind):
         for i in range(kind.num_fields):
             _check_widths(array.field(i))
 
@@ -181,12 +178,20 @@ def _check_schema(meta: bytes) -> None:
     units, decimal widths, one child for lists and maps, the type table present where it
     has parameters. Reads ``Schema`` (``fields`` field 1) and each ``Field`` (``type_type``
     2, ``type`` 3, ``children`` 5)."""
+    kind, header = _header(meta)
+    if kind == _SCHEMA:
+        _check_fields(meta, header, 1, 0)
+
+
+def _header(meta: bytes) -> tuple[int | None, int]:
+    """The ``Message`` table's ``header_type`` (``None`` without a header) and the
+    position of its ``header`` table."""
     root = _u32(meta, 0)
     kind = _field(meta, root, 1)
     header = _field(meta, root, 2)
-    if kind is None or header is None or meta[kind] != _SCHEMA:
-        return
-    _check_fields(meta, header + _u32(meta, header), 1, 0)
+    if kind is None or header is None:
+        return None, 0
+    return meta[kind], header + _u32(meta, header)
 
 
 def _vector(meta: bytes, table: int, number: int) -> list[int]:
@@ -249,13 +254,7 @@ def _check_buffers(meta: bytes, body_size: int) -> None:
     the flatbuffer ``Message`` table (``header_type`` field 1, ``header`` field 2), the
     ``RecordBatch`` (``nodes`` field 1, ``buffers`` field 2), or a ``DictionaryBatch``'s
     ``data`` (field 1)."""
-    root = _u32(meta, 0)
-    kind = _field(meta, root, 1)
-    header = _field(meta, root, 2)
-    if kind is None or header is None:
-        return
-    kind = meta[kind]
-    batch = header + _u32(meta, header)
+    kind, batch = _header(meta)
     if kind == _DICTIONARY_BATCH:
         data = _field(meta, batch, 1)
         if data is None:
