@@ -19,7 +19,7 @@
    the two results.
 
 Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_certified_parts.py
-[--seed 0]``
+[--seed 0] [--size 100]``
 """
 
 from __future__ import annotations
@@ -88,10 +88,12 @@ def upper_passes(prod: ProductIMDP, sol, passes: int, lazy: bool) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--size", type=int, default=100, help="grid side (cells)")
     args = ap.parse_args()
     small = ProductIMDP(make_grid(np.random.default_rng(1), 12)[0], until_automaton())
     satisfaction(small)  # load or compile the kernels
-    prod = ProductIMDP(make_grid(np.random.default_rng(args.seed))[0], until_automaton())
+    grid = make_grid(np.random.default_rng(args.seed), args.size)[0]
+    prod = ProductIMDP(grid, until_automaton())
     sol = satisfaction(prod)
 
     sub, b = chain_of(prod, sol)
@@ -114,12 +116,12 @@ def main() -> None:
 
     interval = importlib.import_module("planner.imdp.interval")
     threaded, t_threaded = best_of(lambda: satisfaction(prod), 3)
-    pool = interval._pool
-    interval._pool = _InTurn
+    worker = interval.worker
+    interval.worker = lambda purpose: _InTurn()
     try:
         in_turn, t_in_turn = best_of(lambda: satisfaction(prod), 3)
     finally:
-        interval._pool = pool
+        interval.worker = worker
     same = np.array_equal(threaded.lower, in_turn.lower) and np.array_equal(
         threaded.upper, in_turn.upper
     )
