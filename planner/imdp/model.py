@@ -130,14 +130,15 @@ class IMDP:
         if code:
             _raise_entry_error(code, i, s, a, t, lo, up, n, n_act)
         if perm.size:  # builders that emit sorted entries skip the reordering
-            s, a, t, lo, up = s[perm], a[perm], t[perm], lo[perm], up[perm]
-        code, r, row_ptr, sum_lo, sum_up = _rows(s, a, t, lo, up, float(tolerance))
+            t, lo, up = _sorted_entries(perm, t, lo, up)
+        code, r, row_ptr, row_state, row_action, sum_lo, sum_up = _rows(
+            s, a, t, lo, up, perm, float(tolerance)
+        )
         if code == 1:
+            e = perm[r] if perm.size else r
             raise DuplicateSuccessorError(
-                f"state {s[r]}, action {a[r]} lists successor {t[r]} more than once"
+                f"state {s[e]}, action {a[e]} lists successor {t[r]} more than once"
             )
-        row_state = s[row_ptr[:-1]]
-        row_action = a[row_ptr[:-1]]
         if code == 2:
             raise RowSumError(
                 f"state {row_state[r]}, action {row_action[r]}: bounds do not bracket 1 "
@@ -443,31 +444,62 @@ def _check_entries(s, a, t, lo, up, n, n_act):
 
 
 @numba.njit(cache=True, nogil=True)
-def _rows(s, a, t, lo, up, tol):
-    """Rows of sorted entries: ``(code, index, row_ptr, sum_lower, sum_upper)``; code 1: a
-    duplicate successor at entry ``index``, 2: row ``index`` does not bracket 1."""
-    m = s.size
-    n_rows = 0
+def _sorted_entries(perm, t, lo, up):
+    """``t[perm], lo[perm], up[perm]``, compiled: numba's allocator hands out fresh pages
+    without numpy's transparent-huge-page advice, which costs about 13 ms per MB on a VM
+    whose kernel compacts memory for it (7.2M entries: 2.4 s of numpy gathers, 0.2 s
+    here)."""
+    m = perm.size
+    t2 = np.empty(m, dtype=np.int64)
+    lo2 = np.empty(m)
+    up2 = np.empty(m)
     for i in range(m):
-        if i == 0 or s[i] != s[i - 1] or a[i] != a[i - 1]:
+        e = perm[i]
+        t2[i] = t[e]
+        lo2[i] = lo[e]
+        up2[i] = up[e]
+    return t2, lo2, up2
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows(s, a, t, lo, up, perm, tol):
+    """Rows of sorted entries: ``(code, index, row_ptr, row_state, row_action, sum_lower,
+    sum_upper)``; code 1: a duplicate successor at sorted entry ``index``, 2: row ``index``
+    does not bracket 1. ``t``, ``lo``, ``up`` are in sorted order; ``s`` and ``a`` are read
+    through ``perm`` (the sorting permutation; empty when the entries came sorted)."""
+    m = t.size
+    sorted_in = perm.size == 0
+    n_rows = 0
+    prev_s, prev_a = -1, -1
+    for i in range(m):
+        e = i if sorted_in else perm[i]
+        if s[e] != prev_s or a[e] != prev_a:
             n_rows += 1
+            prev_s, prev_a = s[e], a[e]
     row_ptr = np.empty(n_rows + 1, dtype=np.int64)
+    row_state = np.empty(n_rows, dtype=np.int64)
+    row_action = np.empty(n_rows, dtype=np.int64)
     sum_lo = np.zeros(n_rows)
     sum_up = np.zeros(n_rows)
     r = -1
+    prev_s, prev_a = -1, -1
     for i in range(m):
-        if i == 0 or s[i] != s[i - 1] or a[i] != a[i - 1]:
+        e = i if sorted_in else perm[i]
+        if s[e] != prev_s or a[e] != prev_a:
             r += 1
             row_ptr[r] = i
+            prev_s, prev_a = s[e], a[e]
+            row_state[r] = prev_s
+            row_action[r] = prev_a
         elif t[i] == t[i - 1]:
-            return 1, i, row_ptr, sum_lo, sum_up
+            return 1, i, row_ptr, row_state, row_action, sum_lo, sum_up
         sum_lo[r] += lo[i]
         sum_up[r] += up[i]
     row_ptr[n_rows] = m
     for k in range(n_rows):
         if sum_lo[k] > 1.0 + tol or sum_up[k] < 1.0 - tol:
-            return 2, k, row_ptr, sum_lo, sum_up
-    return 0, 0, row_ptr, sum_lo, sum_up
+            return 2, k, row_ptr, row_state, row_action, sum_lo, sum_up
+    return 0, 0, row_ptr, row_state, row_action, sum_lo, sum_up
 
 
 @numba.njit(cache=True, nogil=True)

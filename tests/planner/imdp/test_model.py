@@ -73,6 +73,36 @@ def test_duplicate_successor():
         IMDP(2, [0, 0, 1], [0, 0, 0], [1, 1, 1], [0, 0, 1], [1, 1, 1])
 
 
+def test_shuffled_entries_give_the_sorted_model_and_name_the_right_entry():
+    rng = np.random.default_rng(4)
+    n, n_act, k = 40, 3, 5
+    state = np.repeat(np.arange(n), n_act * k)
+    action = np.tile(np.repeat(np.arange(n_act), k), n)
+    succ = np.concatenate([rng.choice(n, size=k, replace=False) for _ in range(n * n_act)])
+    p = rng.dirichlet(np.ones(k), size=n * n_act).ravel()
+    lo, up = 0.5 * p, np.minimum(1.0, 1.5 * p)
+    key = np.lexsort((succ, action, state))
+    ref = IMDP(n, state[key], action[key], succ[key], lo[key], up[key])
+    shuffle = rng.permutation(state.size)
+    args = (state[shuffle], action[shuffle], succ[shuffle], lo[shuffle], up[shuffle])
+    m = IMDP(n, *args)
+    for name in ("row_state", "row_action", "row_ptr", "successor", "lower", "upper"):
+        np.testing.assert_array_equal(getattr(m, name), getattr(ref, name))
+    # errors found after the sorting still name the entry as given
+    dup = succ[shuffle].copy()
+    row = (state[shuffle] == 7) & (action[shuffle] == 2)
+    first, second = np.flatnonzero(row)[:2]
+    dup[second] = dup[first]
+    with pytest.raises(
+        DuplicateSuccessorError, match=f"state 7, action 2 lists successor {dup[first]} "
+    ):
+        IMDP(n, args[0], args[1], dup, args[3], args[4])
+    low = args[4].copy()
+    low[row] = 0.1
+    with pytest.raises(RowSumError, match="state 7, action 2:"):
+        IMDP(n, args[0], args[1], args[2], args[3], np.maximum(low, args[3]))
+
+
 def test_unknown_label():
     with pytest.raises(UnknownLabelError, match="state 1"):
         two_state(labels=[(), ("goal",)], propositions=("Haz",))
