@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
-import numba
 import numpy as np
 
 from planner.errors import (
@@ -34,6 +33,7 @@ from planner.errors import (
     RowSumError,
     UnknownLabelError,
 )
+from planner.imdp.entries import check_entries, entry_rows, row_layout, sorted_entries
 
 
 def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
@@ -126,12 +126,12 @@ class IMDP:
                 f"{len(s)}, {len(a)}, {len(t)}, {len(lo)}, {len(up)}"
             )
         n_act = int(n_actions) if n_actions is not None else (int(a.max()) + 1 if a.size else 1)
-        code, i, perm = _check_entries(s, a, t, lo, up, n, n_act)
+        code, i, perm = check_entries(s, a, t, lo, up, n, n_act)
         if code:
             _raise_entry_error(code, i, s, a, t, lo, up, n, n_act)
         if perm.size:  # builders that emit sorted entries skip the reordering
-            t, lo, up = _sorted_entries(perm, t, lo, up)
-        code, r, row_ptr, row_state, row_action, sum_lo, sum_up = _rows(
+            t, lo, up = sorted_entries(perm, t, lo, up)
+        code, r, row_ptr, row_state, row_action, sum_lo, sum_up = row_layout(
             s, a, t, lo, up, perm, float(tolerance)
         )
         if code == 1:
@@ -232,7 +232,7 @@ class IMDP:
         self.successor: np.ndarray = successor
         self.lower: np.ndarray = lower
         self.upper: np.ndarray = upper
-        self.entry_row: np.ndarray = _entry_rows(row_ptr)
+        self.entry_row: np.ndarray = entry_rows(row_ptr)
         self.row_lower_sum: np.ndarray = sum_lo
         self.row_upper_sum: np.ndarray = sum_up
         self.enabled: np.ndarray = np.zeros((n, n_act), dtype=bool)
@@ -385,131 +385,6 @@ class IMDP:
             f"IMDP(states={self.n_states}, actions={self.n_actions}, rows={self.n_rows}, "
             f"entries={self.n_entries}, propositions={self.propositions})"
         )
-
-
-@numba.njit(cache=True, nogil=True)
-def _check_entries(s, a, t, lo, up, n, n_act):
-    """Ranges and bounds of every entry, and the order of the entries: ``(code, index,
-    permutation)`` with code 0 (fine), 1 state, 2 successor, 3 action out of range,
-    4 a bound outside ``[0, 1]`` or not finite, 5 ``lower > upper``; the permutation is
-    empty when the entries are already sorted by (state, action, successor), else it
-    sorts them (a counting sort on (state, action), then each row by successor)."""
-    m = s.size
-    empty = np.zeros(0, dtype=np.int64)
-    for i in range(m):
-        if s[i] < 0 or s[i] >= n:
-            return 1, i, empty
-        if t[i] < 0 or t[i] >= n:
-            return 2, i, empty
-        if a[i] < 0 or a[i] >= n_act:
-            return 3, i, empty
-        li = lo[i]
-        ui = up[i]
-        if not (np.isfinite(li) and np.isfinite(ui)) or li < 0.0 or ui > 1.0:
-            return 4, i, empty
-        if li > ui:
-            return 5, i, empty
-    ordered = True
-    for i in range(1, m):
-        k0 = s[i - 1] * n_act + a[i - 1]
-        k1 = s[i] * n_act + a[i]
-        if k1 < k0 or (k1 == k0 and t[i] < t[i - 1]):
-            ordered = False
-            break
-    if ordered:
-        return 0, 0, empty
-    n_keys = n * n_act
-    ptr = np.zeros(n_keys + 1, dtype=np.int64)
-    for i in range(m):
-        ptr[s[i] * n_act + a[i] + 1] += 1
-    for k in range(n_keys):
-        ptr[k + 1] += ptr[k]
-    fill = ptr[:-1].copy()
-    perm = np.empty(m, dtype=np.int64)
-    for i in range(m):
-        k = s[i] * n_act + a[i]
-        perm[fill[k]] = i
-        fill[k] += 1
-    for k in range(n_keys):
-        # insertion sort of the row by successor (rows are short)
-        for j in range(ptr[k] + 1, ptr[k + 1]):
-            e = perm[j]
-            key = t[e]
-            h = j - 1
-            while h >= ptr[k] and t[perm[h]] > key:
-                perm[h + 1] = perm[h]
-                h -= 1
-            perm[h + 1] = e
-    return 0, 0, perm
-
-
-@numba.njit(cache=True, nogil=True)
-def _sorted_entries(perm, t, lo, up):
-    """``t[perm], lo[perm], up[perm]``, compiled: numba's allocator hands out fresh pages
-    without numpy's transparent-huge-page advice, which costs about 13 ms per MB on a VM
-    whose kernel compacts memory for it (7.2M entries: 2.4 s of numpy gathers, 0.2 s
-    here)."""
-    m = perm.size
-    t2 = np.empty(m, dtype=np.int64)
-    lo2 = np.empty(m)
-    up2 = np.empty(m)
-    for i in range(m):
-        e = perm[i]
-        t2[i] = t[e]
-        lo2[i] = lo[e]
-        up2[i] = up[e]
-    return t2, lo2, up2
-
-
-@numba.njit(cache=True, nogil=True)
-def _rows(s, a, t, lo, up, perm, tol):
-    """Rows of sorted entries: ``(code, index, row_ptr, row_state, row_action, sum_lower,
-    sum_upper)``; code 1: a duplicate successor at sorted entry ``index``, 2: row ``index``
-    does not bracket 1. ``t``, ``lo``, ``up`` are in sorted order; ``s`` and ``a`` are read
-    through ``perm`` (the sorting permutation; empty when the entries came sorted)."""
-    m = t.size
-    sorted_in = perm.size == 0
-    n_rows = 0
-    prev_s, prev_a = -1, -1
-    for i in range(m):
-        e = i if sorted_in else perm[i]
-        if s[e] != prev_s or a[e] != prev_a:
-            n_rows += 1
-            prev_s, prev_a = s[e], a[e]
-    row_ptr = np.empty(n_rows + 1, dtype=np.int64)
-    row_state = np.empty(n_rows, dtype=np.int64)
-    row_action = np.empty(n_rows, dtype=np.int64)
-    sum_lo = np.zeros(n_rows)
-    sum_up = np.zeros(n_rows)
-    r = -1
-    prev_s, prev_a = -1, -1
-    for i in range(m):
-        e = i if sorted_in else perm[i]
-        if s[e] != prev_s or a[e] != prev_a:
-            r += 1
-            row_ptr[r] = i
-            prev_s, prev_a = s[e], a[e]
-            row_state[r] = prev_s
-            row_action[r] = prev_a
-        elif t[i] == t[i - 1]:
-            return 1, i, row_ptr, row_state, row_action, sum_lo, sum_up
-        sum_lo[r] += lo[i]
-        sum_up[r] += up[i]
-    row_ptr[n_rows] = m
-    for k in range(n_rows):
-        if sum_lo[k] > 1.0 + tol or sum_up[k] < 1.0 - tol:
-            return 2, k, row_ptr, row_state, row_action, sum_lo, sum_up
-    return 0, 0, row_ptr, row_state, row_action, sum_lo, sum_up
-
-
-@numba.njit(cache=True, nogil=True)
-def _entry_rows(row_ptr):
-    """The row of every entry."""
-    out = np.empty(row_ptr[-1], dtype=np.int64)
-    for r in range(row_ptr.size - 1):
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            out[e] = r
-    return out
 
 
 def _raise_entry_error(code, i, s, a, t, lo, up, n, n_act) -> None:
