@@ -159,9 +159,11 @@ class ValueIteration:
         max_iterations: give up after this many sweeps (the solution then reports
             ``converged=False`` and the bracket reached so far).
         callback: called as ``callback(iteration, residual)`` after every sweep.
-        precompute: settle the states of (worst- or best-case) reachability probability
-            0 and (worst case) 1 by graph analysis before iterating (default). Without it
-            the iteration alone approaches the same least fixed point, more slowly.
+        precompute: settle the states of reachability probability 0 and (worst case, or
+            a minimising strategy) 1 by graph analysis before iterating (default). Without
+            it the values from below approach the same least fixed point, more slowly, and
+            a minimising strategy's bound from above can stay at 1 where it could keep a
+            run away from the target for ever.
         strategy_iteration: for maximal reachability, switch to robust strategy
             iteration (exact sparse evaluation of a strategy against the adversary's best
             response, then strict improvements) when the sweeps creep towards the
@@ -206,7 +208,9 @@ class Solution:
             uncertified mode ``upper`` is only the trivial bound (1 for reachability; for
             discounted reward the residual bound, which is sound for that property).
         strategy: ``(n_states,)`` chosen action per state (-1: none; targets, avoided
-            states, states settled by graph analysis and states without allowed actions).
+            states, states without allowed actions and states settled by graph analysis
+            where the action does not matter; a maximising strategy's value-1 states and
+            a minimising one's value-0 states get the action that attains the value).
         residual: the last ``max |V_k - V_{k-1}|`` (a sweep with the exact order).
         iterations: the number of sweeps (from below; the sweeps that check or tighten
             the upper bound are counted in ``upper_sweeps``).

@@ -8,7 +8,11 @@ Properties:
 
 * :class:`ReachAvoid`: probability of ``(!avoid) U target``. Value iteration starts from 0
   (the least fixed point, right also with end components and zero lower bounds); states
-  whose value is 0 or 1 are found by graph analysis first and held fixed.
+  whose value is 0 or 1 are found by graph analysis first and held fixed. For a
+  minimising strategy the value-0 states are those where it can keep every run away from
+  the target (:func:`planner.imdp.graph.unavoidable_reach`): the end components in which
+  it could hover for ever lie among them, so the bound from above converges on the rest
+  (with them free it would stay at 1 there).
 * :class:`DiscountedReward`: ``V(s) = opt_a min/max_p sum_{s'} p(s') (W(s') + gamma V(s'))``:
   the reward ``W`` is collected on *landing* in a state (docs/design.md).
 
@@ -93,10 +97,13 @@ def _settled(
     target_closed: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The states of a reach-avoid problem settled before iterating: ``(settled, value,
-    prob1, prob1_choice)``: targets, avoided states and (with ``precompute``) the states
-    of value 0 and, worst case maximising, of value 1 by graph analysis, with the rows by
-    which the value-1 states get there (-1 elsewhere). ``target_closed``: the target holds
-    every state that reaches it almost surely, so the probability-1 search is skipped."""
+    choice)``: targets, avoided states and (with ``precompute``) the states of value 0
+    and, worst case maximising or minimising, of value 1 by graph analysis; ``choice`` the
+    row by which a settled state attains its value where the action matters (-1
+    elsewhere): a maximising strategy's way to the target from its value-1 states, a
+    minimising one's way to stay clear of it at its value-0 states. ``target_closed``:
+    the target holds every state that reaches it almost surely, so the probability-1
+    search is skipped."""
     n = m.n_states
     target = resolve_states(m, prop.target, "target")
     avoid = (
@@ -104,21 +111,33 @@ def _settled(
         if prop.avoid is None
         else resolve_states(m, prop.avoid, "avoid") & ~target
     )
-    prob1_choice = np.full(n, -1, dtype=np.int64)
+    choice = np.full(n, -1, dtype=np.int64)
     prob1 = np.zeros(n, dtype=bool)
     if not precompute:
         zero = np.zeros(n, dtype=bool)
     elif maximize and pessimistic:
         pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
         if not target_closed:
-            prob1, prob1_choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+            prob1, choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+            choice = np.where(prob1, choice, -1)
         zero = ~pos
     elif maximize:
         zero = ~graph.possible_reach(m, target, avoid, rows)
     else:
-        zero = np.zeros(n, dtype=bool)
+        # a minimising controller: the states where it can keep the probability at 0, and
+        # those from which it cannot make it less than 1: no chance of reaching them (an
+        # opposing adversary: none that the controller can force)
+        positive, choice = graph.unavoidable_reach(
+            m, target, avoid, rows, cooperative=not pessimistic
+        )
+        zero = ~positive
+        if pessimistic:
+            escape, _ = graph.robust_positive_reach(m, zero, target, rows)
+        else:
+            escape = graph.possible_reach(m, zero, target, rows)
+        prob1 = ~escape & ~target & ~zero
     settled = target | avoid | zero | prob1
-    return settled, np.where(target | prob1, 1.0, 0.0), prob1, prob1_choice
+    return settled, np.where(target | prob1, 1.0, 0.0), choice
 
 
 def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np.ndarray):
@@ -164,7 +183,7 @@ def solve_with(
     if reach and alg.initial is not None:
         raise SpecificationError("initial values are for discounted reward (reachability from 0)")
     if reach:
-        settled, fixed_val, prob1, prob1_choice = _settled(
+        settled, fixed_val, settled_choice = _settled(
             m, prop, rows, maximize, pessimistic, alg.precompute, target_closed
         )
         fixed = fixed | settled
@@ -198,8 +217,8 @@ def solve_with(
     if sigma is not None:
         # strategy iteration's strategy: its exact value is the least fixed point
         strategy[rs[seg]] = m.row_action[sigma]
-    if reach and maximize and pessimistic:
-        strategy = np.where(prob1 & (prob1_choice >= 0), m.row_action[prob1_choice], strategy)
+    if reach:
+        strategy = np.where(settled_choice >= 0, m.row_action[settled_choice], strategy)
     return Solution(
         values=v,
         strategy=strategy,

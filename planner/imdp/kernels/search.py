@@ -87,6 +87,91 @@ def robust_attractor(
 
 
 @numba.njit(cache=True, nogil=True)
+def minimizer_attractor(
+    start,
+    cand,
+    row_state,
+    row_ptr,
+    successor,
+    lower,
+    upper,
+    inc_ptr,
+    inc_row,
+    inc_state,
+    inc_lower,
+    inc_upper,
+    cooperative,
+    limit,
+):
+    """The states from which a *minimising* controller cannot keep the probability of
+    reaching ``start`` at 0 (work list, as :func:`robust_attractor` with the quantifier
+    over the rows swapped): a state joins once *every* one of its candidate rows leaks
+    into the set. With an opposing adversary (``cooperative=False``) a row leaks when it
+    has an ``upper > 0`` entry into the set (the adversary may send mass there); with a
+    cooperating one when every adversary must: an entry with ``lower > 0`` into the set,
+    or an ``upper > 0`` entry into it while the upper bounds of the entries outside sum to
+    less than ``limit``. States without candidate rows never join. Returns ``(mask,
+    leaked)``: the candidate rows that do not leak keep every run outside the set (under
+    every adversary, or the cooperating one)."""
+    n_rows = row_ptr.size - 1
+    x = start.copy()
+    left = np.zeros(x.size, dtype=np.int64)
+    leaked = np.zeros(n_rows, dtype=np.bool_)
+    must = np.zeros(n_rows, dtype=np.bool_)
+    touches = np.zeros(n_rows, dtype=np.bool_)
+    outside_up = np.zeros(n_rows)
+    queue = np.empty(x.size, dtype=np.int64)
+    tail = 0
+    for r in range(n_rows):
+        if not cand[r]:
+            continue
+        left[row_state[r]] += 1
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            if x[successor[e]]:
+                if lower[e] > 0.0:
+                    must[r] = True
+                if upper[e] > 0.0:
+                    touches[r] = True
+            else:
+                outside_up[r] += upper[e]
+    for r in range(n_rows):
+        if not cand[r]:
+            continue
+        if touches[r] and (not cooperative or must[r] or outside_up[r] < limit):
+            leaked[r] = True
+            s = row_state[r]
+            left[s] -= 1
+            if left[s] == 0 and not x[s]:
+                x[s] = True
+                queue[tail] = s
+                tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for k in range(inc_ptr[t], inc_ptr[t + 1]):
+            s = inc_state[k]
+            if x[s]:
+                continue
+            r = inc_row[k]
+            if not cand[r] or leaked[r]:
+                continue
+            if inc_lower[k] > 0.0:
+                must[r] = True
+            if inc_upper[k] > 0.0:
+                touches[r] = True
+            outside_up[r] -= inc_upper[k]
+            if touches[r] and (not cooperative or must[r] or outside_up[r] < limit):
+                leaked[r] = True
+                left[s] -= 1
+                if left[s] == 0:
+                    x[s] = True
+                    queue[tail] = s
+                    tail += 1
+    return x, leaked
+
+
+@numba.njit(cache=True, nogil=True)
 def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
     """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
     successor lies in ``u``."""

@@ -190,3 +190,33 @@ def test_accepting_components_equal_the_unfiltered_search(zero_lower):
         found = graph.accepting_end_components(m, good, bad)
         assert as_sets(found, m) == as_sets(_accepting_unfiltered(m, good, bad), m)
     assert filtered > 0  # the filter did remove states
+
+
+def test_unavoidable_reach_of_a_minimising_controller():
+    # 0: target. 1: one action to the target or itself ([0, 0.5] / [0.5, 1]): an opposing
+    # adversary may send mass to the target, a cooperating one keeps it all at 1.
+    # 2: action 0 absorbing, action 1 into 1. 3: into the target for sure.
+    # 4: its self-loop's upper bound is 1 - 1e-10 (within the model's tolerance of 1),
+    # so even a cooperating adversary sends 1e-10 to the target: it does not stay
+    m = IMDP(
+        5,
+        [0, 1, 1, 2, 2, 3, 4, 4],
+        [0, 0, 0, 0, 1, 0, 0, 0],
+        [0, 0, 1, 2, 1, 0, 0, 4],
+        [1.0, 0.0, 0.5, 1.0, 1.0, 1.0, 0.0, 0.6],
+        [1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0 - 1e-10],
+    )
+    target = np.array([True, False, False, False, False])
+    for cooperative, positive in (
+        (False, [True, True, False, True, True]),
+        (True, [True, False, False, True, True]),
+    ):
+        mask, row = graph.unavoidable_reach(m, target, cooperative=cooperative)
+        assert mask.tolist() == positive
+        # the states kept at 0 get the row that keeps them there
+        assert row[2] == m.row_index[2, 0]
+        assert (row[mask] == -1).all()
+        assert (row[1] == m.row_index[1, 0]) == cooperative
+    # an avoided state never joins, whatever its rows do
+    mask, _ = graph.unavoidable_reach(m, target, avoid=np.array([0, 0, 0, 1, 0], bool))
+    assert not mask[3]

@@ -387,3 +387,33 @@ def test_chain_reach_ignores_float_dust_that_closes_a_class():
     m = sp.csr_matrix(np.array([[0.0, 0.5, 0.5], [1.0, 0.0, 0.0]]))
     out = chain_reach(m, np.array([0, 1]), np.array([0.0, 0.0, 1.0]))
     np.testing.assert_allclose(out[:2], 1.0)
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_min_reach_is_certified_and_keeps_its_zero_states(zero_lower, sat):
+    # a minimising controller can hover for ever in end components away from the target:
+    # those states are settled at 0 (with the action that stays), so the bound from above
+    # closes on the rest instead of staying at 1 there
+    rng = np.random.default_rng(31 if zero_lower else 32)
+    hovering = 0
+    for _ in range(6):
+        m = random_imdp(rng, n_states=18, zero_lower=zero_lower)
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+        spec = Specification(ReachAvoid("goal", "bad"), sat, "minimize")
+        sol = solve(Problem(m, spec))
+        ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=False)
+        assert sol.converged and sol.error < 1e-8
+        assert np.all(sol.lower <= ref + 1e-12) and np.all(ref <= sol.upper + 1e-12)
+        zero = (sol.upper == 0) & ~tgt & ~avd
+        hovering += int(zero.sum())
+        for s in np.flatnonzero(zero):
+            r = m.row_index[s, sol.strategy[s]]
+            a, b = m.row_ptr[r], m.row_ptr[r + 1]
+            succ, lo, up = m.successor[a:b], m.lower[a:b], m.upper[a:b]
+            if sat == "pessimistic":  # every successor the adversary may pick is at 0
+                assert np.all(sol.upper[succ[up > 0]] == 0)
+            else:  # the cooperating adversary can keep all mass at 0
+                inside = sol.upper[succ] == 0
+                assert np.all(lo[~inside] == 0) and up[inside].sum() >= 1.0
+    assert hovering > 0  # the models have such states
