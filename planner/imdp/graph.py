@@ -26,7 +26,6 @@ from planner.imdp.kernels import (
     backward_distance,
     forward_reach,
     maximal_end_components_kernel,
-    minimizer_attractor,
     prune_kernel,
     robust_attractor,
     rows_staying_in,
@@ -206,60 +205,6 @@ def robust_positive_reach(
     avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
     cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
     return _attractor(model, target.copy(), cand)
-
-
-def unavoidable_reach(
-    model: IMDP,
-    target: np.ndarray,
-    avoid: np.ndarray | None = None,
-    rows: np.ndarray | None = None,
-    cooperative: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
-    """States whose *minimal* probability of ``(!avoid) U target`` is positive: a
-    minimising controller cannot keep it at 0, against an opposing adversary or, with
-    ``cooperative``, with one that minimises too (targets included).
-
-    Returns ``(mask, row)``: ``row[s]``, for a state outside the mask with rows, one that
-    keeps every run outside it (-1 elsewhere).
-
-    The complement is the largest set outside ``target`` in which the controller can keep
-    every run: a state stays when one of its rows keeps all mass in the set, under every
-    adversary (every ``upper > 0`` successor inside) or, cooperative, under some adversary
-    (no ``lower > 0`` edge out, the upper bounds inside summing to at least 1; computed
-    as the states joining when *every* row leaks, :func:`planner.imdp.kernels
-    .minimizer_attractor`). Rows whose bounds bracket 1 only within the model's tolerance
-    count as leaking: the set of value-0 states found is never larger than the true one,
-    so that settling it at 0 keeps an upper bound sound. ``avoid`` states and states
-    without rows never join (a run there never reaches ``target``).
-    """
-    rows = _all_rows(model, rows)
-    target = np.asarray(target, dtype=bool)
-    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
-    cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
-    m = model
-    ptr, inc_row, inc_state, inc_lower, inc_upper = m.reverse_index()
-    mask, leaked = minimizer_attractor(
-        target.copy(),
-        np.asarray(cand, dtype=bool),
-        m.row_state,
-        m.row_ptr,
-        m.successor,
-        m.lower,
-        m.upper,
-        ptr,
-        inc_row,
-        inc_state,
-        inc_lower,
-        inc_upper,
-        bool(cooperative),
-        1.0,
-    )
-    staying = np.flatnonzero(cand & ~leaked & ~mask[m.row_state])
-    row = np.full(m.n_states, -1, dtype=np.int64)
-    # rows are sorted by state: the first staying row of each state
-    first = staying[first_of_runs(m.row_state[staying])]
-    row[m.row_state[first]] = first
-    return mask, row
 
 
 def _attractor(

@@ -10,9 +10,11 @@ Properties:
   (the least fixed point, right also with end components and zero lower bounds); states
   whose value is 0 or 1 are found by graph analysis first and held fixed. For a
   minimising strategy the value-0 states are those where it can keep every run away from
-  the target (:func:`planner.imdp.graph.unavoidable_reach`): the end components in which
+  the target (:func:`planner.imdp.minimal.unavoidable_reach`): the end components in which
   it could hover for ever lie among them, so the bound from above converges on the rest
-  (with them free it would stay at 1 there).
+  (with them free it would stay at 1 there). Certified, a minimal reachability problem is
+  solved as its dual, the maximal reachability of the value-0 states
+  (:mod:`planner.imdp.minimal`).
 * :class:`DiscountedReward`: ``V(s) = opt_a min/max_p sum_{s'} p(s') (W(s') + gamma V(s'))``:
   the reward ``W`` is collected on *landing* in a state (docs/design.md).
 
@@ -57,6 +59,7 @@ import numpy as np
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.discounted import discounted_values
+from planner.imdp.minimal import dual_reach, unavoidable_reach
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import (
@@ -127,9 +130,7 @@ def _settled(
         # a minimising controller: the states where it can keep the probability at 0, and
         # those from which it cannot make it less than 1: no chance of reaching them (an
         # opposing adversary: none that the controller can force)
-        positive, choice = graph.unavoidable_reach(
-            m, target, avoid, rows, cooperative=not pessimistic
-        )
+        positive, choice = unavoidable_reach(m, target, avoid, rows, cooperative=not pessimistic)
         zero = ~positive
         if pessimistic:
             escape, _ = graph.robust_positive_reach(m, zero, target, rows)
@@ -193,10 +194,16 @@ def solve_with(
     seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1]))) if rs.size else rs
     sigma = None
     evaluations = upper_sweeps = 0
+    # a minimising strategy, certified: through its dual (see the module docstring)
+    dual = reach and not maximize and alg.precompute and alg.certified
     if reach:
-        r = reach_values(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
-        v, upper, residual, it, sigma = r.lower, r.upper, r.residual, r.iterations, r.sigma
-        evaluations, q_free, upper_sweeps, lower = r.evaluations, r.q, r.upper_sweeps, v.copy()
+        if dual:
+            lower, upper, r = dual_reach(m, free_rows, fixed, fixed_val, adversary_minimizes, alg)
+        else:
+            r = reach_values(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+            lower, upper = r.lower, r.upper
+        v, residual, it, sigma = lower.copy(), r.residual, r.iterations, r.sigma
+        evaluations, q_free, upper_sweeps = r.evaluations, r.q, r.upper_sweeps
         converged = (
             bool(np.max(upper - lower, initial=0.0) < alg.tolerance)
             if alg.certified
@@ -211,8 +218,9 @@ def solve_with(
         v, lower, upper, residual, it = d.values, d.lower, d.upper, d.residual, d.iterations
         q_free, converged = d.q, d.converged
         final_v = reward + float(prop.discount) * v
+    greedy_v, greedy_max = (r.lower, True) if dual else (v, maximize)  # the dual's is ours
     strategy = strategy_actions(
-        m, free_rows, q_free, seg, rs[seg], v, maximize, prop, alg.tolerance
+        m, free_rows, q_free, seg, rs[seg], greedy_v, greedy_max, prop, alg.tolerance
     )
     if sigma is not None:
         # strategy iteration's strategy: its exact value is the least fixed point

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from planner.errors import SpecificationError
-from planner.imdp import IMDP, graph
+from planner.imdp import IMDP, graph, minimal
 from planner.modes import Adversary
 from tests.planner.imdp.reference import random_imdp
 
@@ -211,12 +211,12 @@ def test_unavoidable_reach_of_a_minimising_controller():
         (False, [True, True, False, True, True]),
         (True, [True, False, False, True, True]),
     ):
-        mask, row = graph.unavoidable_reach(m, target, cooperative=cooperative)
+        mask, row = minimal.unavoidable_reach(m, target, cooperative=cooperative)
         assert mask.tolist() == positive
         # the states kept at 0 get the row that keeps them there
         assert row[2] == m.row_index[2, 0]
         assert (row[mask] == -1).all()
         assert (row[1] == m.row_index[1, 0]) == cooperative
     # an avoided state never joins, whatever its rows do
-    mask, _ = graph.unavoidable_reach(m, target, avoid=np.array([0, 0, 0, 1, 0], bool))
+    mask, _ = minimal.unavoidable_reach(m, target, avoid=np.array([0, 0, 0, 1, 0], bool))
     assert not mask[3]

@@ -405,6 +405,14 @@ def test_min_reach_is_certified_and_keeps_its_zero_states(zero_lower, sat):
         ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=False)
         assert sol.converged and sol.error < 1e-8
         assert np.all(sol.lower <= ref + 1e-12) and np.all(ref <= sol.upper + 1e-12)
+        # the strategy attains the bracket: with only its actions allowed (one per state
+        # where it chose one) the same problem has the same value
+        allowed = np.zeros((m.n_states, m.n_actions), dtype=bool)
+        has = sol.strategy >= 0
+        allowed[np.flatnonzero(has), sol.strategy[has]] = True
+        allowed[~has] = m.enabled[~has]
+        own = solve(Problem(m, spec, allowed=allowed))
+        assert np.all(own.lower <= sol.upper + 1e-9)
         zero = (sol.upper == 0) & ~tgt & ~avd
         hovering += int(zero.sum())
         for s in np.flatnonzero(zero):
@@ -417,3 +425,44 @@ def test_min_reach_is_certified_and_keeps_its_zero_states(zero_lower, sat):
                 inside = sol.upper[succ] == 0
                 assert np.all(lo[~inside] == 0) and up[inside].sum() >= 1.0
     assert hovering > 0  # the models have such states
+
+
+def _sticky_imdp(rng: np.random.Generator, n: int) -> IMDP:
+    """One action per state, half the states with a self-loop, every lower bound positive:
+    mass circulates long among states of nearly equal value."""
+    s, t, lo, up = [], [], [], []
+    for q in range(n):
+        k = int(rng.integers(1, 4))
+        succ = rng.choice(n, size=k, replace=False)
+        if rng.random() < 0.5 and q not in succ:
+            succ[0] = q
+        p = rng.dirichlet(np.ones(k))
+        lower = np.maximum(p * rng.uniform(0.2, 1.0, size=k), 1e-3)
+        lower = lower / max(1.0, lower.sum() / 0.999)
+        upper = np.maximum(np.minimum(1.0, p + rng.uniform(0.0, 0.3, size=k)), lower)
+        if upper.sum() < 1.0:
+            upper = np.minimum(1.0, upper / upper.sum() * 1.001)
+        s += [q] * k
+        t += succ.tolist()
+        lo += lower.tolist()
+        up += upper.tolist()
+    kind = rng.random(n)
+    labels = [("goal",) if x < 0.15 else ("bad",) if x < 0.35 else () for x in kind]
+    return IMDP(n, s, [0] * len(s), t, lo, up, labels=labels, propositions=("bad", "goal"))
+
+
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_min_reach_of_slowly_mixing_chains_is_certified(sat):
+    # minimal reachability is solved as the maximal reachability of the value-0 states:
+    # its bound from above closes where sweeps from 1 alone crept for ever
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        m = _sticky_imdp(rng, 120)
+        spec = Specification(ReachAvoid("goal", "bad"), sat, "minimize")
+        sol = solve(Problem(m, spec))
+        assert sol.converged and sol.error < 1e-8
+        assert np.all(sol.values == sol.lower)
+        # the values are the maximising side's complement: the same bracket from above
+        tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+        ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=False)
+        assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)

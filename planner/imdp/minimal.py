@@ -1,0 +1,104 @@
+"""Minimal reachability: the states a minimising controller settles by graph analysis,
+and the dual problem that certifies its values.
+
+A minimising controller's value-0 states ``Z`` are the largest set in which it can keep
+every run away from the target (:func:`unavoidable_reach`). Every run of an optimal
+minimising strategy that never reaches the target ends in ``Z`` (an end component it could
+hover in for ever lies in ``Z``), so
+
+    ``V_min(reach target) = 1 - V_max(reach Z)``
+
+with the target held at 0 and the adversary's goal reversed: an adversary that opposes
+the minimiser (drives runs to the target) keeps them from ``Z``, one that cooperates
+drives them to ``Z``. The dual is a maximal reachability problem and has that side's
+certified machinery (interval iteration with end components, strategy iteration;
+:func:`planner.imdp.reachability.reach_values`); its bracket ``[L, U]`` gives ``[1 - U,
+1 - L]`` (:func:`dual_reach`), and its optimal strategy is the minimising one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.imdp import graph
+from planner.imdp.kernels import minimizer_attractor
+from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.problem import ValueIteration
+from planner.imdp.reachability import ReachResult, reach_values
+
+
+def unavoidable_reach(
+    model: IMDP,
+    target: np.ndarray,
+    avoid: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
+    cooperative: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """States whose *minimal* probability of ``(!avoid) U target`` is positive: a
+    minimising controller cannot keep it at 0, against an opposing adversary or, with
+    ``cooperative``, with one that minimises too (targets included).
+
+    Returns ``(mask, row)``: ``row[s]``, for a state outside the mask with rows, one that
+    keeps every run outside it (-1 elsewhere).
+
+    The complement is the largest set outside ``target`` in which the controller can keep
+    every run: a state stays when one of its rows keeps all mass in the set, under every
+    adversary (every ``upper > 0`` successor inside) or, cooperative, under some adversary
+    (no ``lower > 0`` edge out, the upper bounds inside summing to at least 1; computed
+    as the states joining when *every* row leaks, :func:`planner.imdp.kernels
+    .minimizer_attractor`). Rows whose bounds bracket 1 only within the model's tolerance
+    count as leaking: the set of value-0 states found is never larger than the true one,
+    so that settling it at 0 keeps an upper bound sound. ``avoid`` states and states
+    without rows never join (a run there never reaches ``target``).
+    """
+    rows = graph._all_rows(model, rows)
+    target = np.asarray(target, dtype=bool)
+    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
+    cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
+    m = model
+    ptr, inc_row, inc_state, inc_lower, inc_upper = m.reverse_index()
+    mask, leaked = minimizer_attractor(
+        target.copy(),
+        np.asarray(cand, dtype=bool),
+        m.row_state,
+        m.row_ptr,
+        m.successor,
+        m.lower,
+        m.upper,
+        ptr,
+        inc_row,
+        inc_state,
+        inc_lower,
+        inc_upper,
+        bool(cooperative),
+        1.0,
+    )
+    staying = np.flatnonzero(cand & ~leaked & ~mask[m.row_state])
+    row = np.full(m.n_states, -1, dtype=np.int64)
+    # rows are sorted by state: the first staying row of each state
+    first = staying[first_of_runs(m.row_state[staying])]
+    row[m.row_state[first]] = first
+    return mask, row
+
+
+def dual_reach(
+    m: IMDP,
+    free_rows: np.ndarray,
+    fixed: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    alg: ValueIteration,
+) -> tuple[np.ndarray, np.ndarray, ReachResult]:
+    """The certified bracket ``(lower, upper)`` of a minimal reachability problem whose
+    value-0 and value-1 states are settled (``fixed``, with ``fixed_val``), from its dual,
+    and the dual's result (its ``q``, strategy and counts are the maximising side's).
+
+    The bracket is rounded outwards on the free states (``1 - x`` is exact for
+    ``x >= 0.5`` and off by at most half an ulp of 1 below it) and exact on the settled
+    ones."""
+    dual_val = np.where(fixed, 1.0 - fixed_val, 0.0)
+    r = reach_values(m, free_rows, dual_val, not adversary_minimizes, True, alg)
+    slack = np.finfo(float).eps / 2
+    lower = np.where(fixed, fixed_val, np.maximum(0.0, 1.0 - r.upper - slack))
+    upper = np.where(fixed, fixed_val, np.minimum(1.0, 1.0 - r.lower + slack))
+    return lower, upper, r
