@@ -23,11 +23,11 @@ import scipy.sparse as sp
 
 from planner.errors import SpecificationError
 from planner.imdp.kernels import (
+    attractor,
     backward_distance,
     forward_reach,
     maximal_end_components_kernel,
     prune_kernel,
-    robust_attractor,
     rows_staying_in,
 )
 from planner.imdp.model import IMDP, first_of_runs
@@ -211,27 +211,26 @@ def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Robust attractor: add states with a candidate row forced into the set (a work list
-    in compiled code, :func:`planner.imdp.kernels.robust_attractor`): every state that
+    in compiled code, :func:`planner.imdp.kernels.attractor`): every state that
     joins re-examines only the rows with an entry into it, so the whole attractor costs
     ``O(entries of the candidate rows)``. ``choice[s]``: the row by which ``s`` joined; it
     puts positive mass, under every adversary, into states that joined before ``s``."""
-    m = model
-    ptr, inc_row, inc_state, inc_lower, inc_upper = m.reverse_index()
-    return robust_attractor(
+    x, choice, _ = attractor(
         np.asarray(start, dtype=bool),
         np.asarray(cand_rows, dtype=bool),
-        m.row_state,
-        m.row_ptr,
-        m.successor,
-        m.lower,
-        m.upper,
-        ptr,
-        inc_row,
-        inc_state,
-        inc_lower,
-        inc_upper,
-        1.0 - m.tolerance,
+        *attractor_arrays(model),
+        1.0 - model.tolerance,
+        False,
+        True,
     )
+    return x, choice
+
+
+def attractor_arrays(model: IMDP) -> tuple[np.ndarray, ...]:
+    """The model's arrays that :func:`planner.imdp.kernels.attractor` reads after its
+    start and candidate rows: the rows, the entries and the reverse index."""
+    m = model
+    return (m.row_state, m.row_ptr, m.successor, m.lower, m.upper, *m.reverse_index())
 
 
 def robust_almost_sure_reach(

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.imdp import graph
-from planner.imdp.kernels import minimizer_attractor
+from planner.imdp.kernels import attractor
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.problem import ValueIteration
 from planner.imdp.reachability import ReachResult, reach_values
@@ -45,8 +45,8 @@ def unavoidable_reach(
     every run: a state stays when one of its rows keeps all mass in the set, under every
     adversary (every ``upper > 0`` successor inside) or, cooperative, under some adversary
     (no ``lower > 0`` edge out, the upper bounds inside summing to at least 1; computed
-    as the states joining when *every* row leaks, :func:`planner.imdp.kernels
-    .minimizer_attractor`). Rows whose bounds bracket 1 only within the model's tolerance
+    as the states joining when *every* row leaks: :func:`planner.imdp.kernels.attractor`
+    with ``every_row``). Rows whose bounds bracket 1 only within the model's tolerance
     count as leaking: the set of value-0 states found is never larger than the true one,
     so that settling it at 0 keeps an upper bound sound. ``avoid`` states and states
     without rows never join (a run there never reaches ``target``).
@@ -56,24 +56,10 @@ def unavoidable_reach(
     avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
     cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
     m = model
-    ptr, inc_row, inc_state, inc_lower, inc_upper = m.reverse_index()
-    mask, leaked = minimizer_attractor(
-        target.copy(),
-        np.asarray(cand, dtype=bool),
-        m.row_state,
-        m.row_ptr,
-        m.successor,
-        m.lower,
-        m.upper,
-        ptr,
-        inc_row,
-        inc_state,
-        inc_lower,
-        inc_upper,
-        bool(cooperative),
-        1.0,
+    mask, _, led = attractor(
+        target.copy(), np.asarray(cand, bool), *graph.attractor_arrays(m), 1.0, True, cooperative
     )
-    staying = np.flatnonzero(cand & ~leaked & ~mask[m.row_state])
+    staying = np.flatnonzero(cand & ~led & ~mask[m.row_state])
     row = np.full(m.n_states, -1, dtype=np.int64)
     # rows are sorted by state: the first staying row of each state
     first = staying[first_of_runs(m.row_state[staying])]

@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from planner.imdp import graph
-from planner.imdp.kernels import counting_order, robust_attractor
+from planner.imdp.kernels import attractor, counting_order
 from planner.imdp.model import IMDP, first_of_runs
 
 
@@ -130,7 +130,7 @@ class _Game:
         m = self.m
         lo, up, inc_lo, inc_up = self._eff(entry_ok)
         cand = rows_ok & region[m.row_state] & ~start[m.row_state]
-        x, choice = robust_attractor(
+        x, choice, _ = attractor(
             start & region,
             cand,
             m.row_state,
@@ -144,6 +144,8 @@ class _Game:
             inc_lo,
             inc_up,
             self.limit,
+            False,
+            True,
         )
         return x & region, choice
 

@@ -7,13 +7,12 @@ from planner.imdp.kernels.components import component_exit_bound, maximal_end_co
 from planner.imdp.kernels.exact import chain_residual
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
+    attractor,
     backward_distance,
     counting_order,
     forward_reach,
     incoming_index,
-    minimizer_attractor,
     prune_kernel,
-    robust_attractor,
     rows_staying_in,
     surest_exit_choice,
 )
@@ -22,6 +21,7 @@ from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep, upper_
 __all__ = [
     "ReachSweeper",
     "all_row_values",
+    "attractor",
     "backward_distance",
     "chain_residual",
     "component_exit_bound",
@@ -31,9 +31,7 @@ __all__ = [
     "gauss_seidel_sweep",
     "incoming_index",
     "maximal_end_components_kernel",
-    "minimizer_attractor",
     "prune_kernel",
-    "robust_attractor",
     "rows_staying_in",
     "surest_exit_choice",
     "upper_sweep",

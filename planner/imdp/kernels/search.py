@@ -1,4 +1,5 @@
-"""Graph searches over the rows of an interval MDP, compiled: the robust attractor, the
+"""Graph searches over the rows of an interval MDP, compiled: the attractors (of a
+controller that wants to reach a set, or to stay away from it), the
 rows that stay in a set, breadth-first distances, forward reachability, the pruning cascade
 of removed states, and a counting sort."""
 
@@ -9,7 +10,7 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def robust_attractor(
+def attractor(
     start,
     cand,
     row_state,
@@ -23,22 +24,31 @@ def robust_attractor(
     inc_lower,
     inc_upper,
     limit,
+    every_row,
+    forced,
 ):
-    """The robust attractor of ``start`` with the candidate rows ``cand`` (work list).
+    """The attractor of ``start`` with the candidate rows ``cand`` (work list).
 
-    A state joins when one of its candidate rows puts positive mass into the set under
-    every adversary: an entry with ``lower > 0`` into the set, or an ``upper > 0`` entry
-    into it while the upper bounds of the entries outside sum to less than ``limit``
-    (``1 - tolerance``). Each state that joins updates only the rows with an entry into it,
-    so the whole attractor costs ``O(entries of the candidate rows + their incoming
-    lists)``; an incoming entry of a row whose state (``inc_state``, read in order) has
-    joined is skipped without looking at the row. Returns ``(mask, choice)``:
-    ``choice[s]`` is the row by which ``s`` joined (-1 for ``start`` and outside); a
-    joining row only counts states that joined before.
+    A candidate row *leads into* the set when it puts positive mass into it under every
+    adversary (``forced``: an entry with ``lower > 0`` into the set, or an ``upper > 0``
+    entry into it while the upper bounds of the entries outside sum to less than
+    ``limit``, ``1 - tolerance``), or under some adversary (an ``upper > 0`` entry into
+    it). A state joins when one of its candidate rows leads into the set (a controller
+    that wants to get there) or, with ``every_row``, when all of them do (one that wants
+    to stay away; states without candidate rows then never join). Each state that joins
+    updates only the rows with an entry into it, so the whole attractor costs ``O(entries
+    of the candidate rows + their incoming lists)``; an incoming entry of a row whose state
+    (``inc_state``, read in order) has joined is skipped without looking at the row.
+    Returns ``(mask, choice, led)``: ``choice[s]`` is the row by which ``s`` joined (-1 for
+    ``start`` and outside; a joining row only counts states that joined before), ``led``
+    the candidate rows found leading into the set (with ``every_row``, the others of a
+    state outside the mask keep every run, under some or every adversary, outside it).
     """
     n_rows = row_ptr.size - 1
     x = start.copy()
     choice = np.full(x.size, -1, dtype=np.int64)
+    left = np.zeros(x.size, dtype=np.int64)
+    led = np.zeros(n_rows, dtype=np.bool_)
     must = np.zeros(n_rows, dtype=np.bool_)
     touches = np.zeros(n_rows, dtype=np.bool_)
     outside_up = np.zeros(n_rows)
@@ -47,6 +57,8 @@ def robust_attractor(
     for r in range(n_rows):
         if not cand[r]:
             continue
+        if every_row:
+            left[row_state[r]] += 1
         for e in range(row_ptr[r], row_ptr[r + 1]):
             if x[successor[e]]:
                 if lower[e] > 0.0:
@@ -57,11 +69,8 @@ def robust_attractor(
                 outside_up[r] += upper[e]
     for r in range(n_rows):
         s = row_state[r]
-        if cand[r] and not x[s] and (must[r] or (touches[r] and outside_up[r] < limit)):
-            x[s] = True
-            choice[s] = r
-            queue[tail] = s
-            tail += 1
+        if cand[r] and not x[s] and touches[r] and (not forced or must[r] or outside_up[r] < limit):
+            tail = _lead(r, s, every_row, led, left, x, choice, queue, tail)
     head = 0
     while head < tail:
         t = queue[head]
@@ -71,104 +80,30 @@ def robust_attractor(
             if x[s]:
                 continue  # the row's state has joined: its counts no longer matter
             r = inc_row[k]
-            if not cand[r]:
+            if not cand[r] or (every_row and led[r]):
                 continue
             if inc_lower[k] > 0.0:
                 must[r] = True
             if inc_upper[k] > 0.0:
                 touches[r] = True
             outside_up[r] -= inc_upper[k]
-            if must[r] or (touches[r] and outside_up[r] < limit):
-                x[s] = True
-                choice[s] = r
-                queue[tail] = s
-                tail += 1
-    return x, choice
+            if touches[r] and (not forced or must[r] or outside_up[r] < limit):
+                tail = _lead(r, s, every_row, led, left, x, choice, queue, tail)
+    return x, choice, led
 
 
-@numba.njit(cache=True, nogil=True)
-def minimizer_attractor(
-    start,
-    cand,
-    row_state,
-    row_ptr,
-    successor,
-    lower,
-    upper,
-    inc_ptr,
-    inc_row,
-    inc_state,
-    inc_lower,
-    inc_upper,
-    cooperative,
-    limit,
-):
-    """The states from which a *minimising* controller cannot keep the probability of
-    reaching ``start`` at 0 (work list, as :func:`robust_attractor` with the quantifier
-    over the rows swapped): a state joins once *every* one of its candidate rows leaks
-    into the set. With an opposing adversary (``cooperative=False``) a row leaks when it
-    has an ``upper > 0`` entry into the set (the adversary may send mass there); with a
-    cooperating one when every adversary must: an entry with ``lower > 0`` into the set,
-    or an ``upper > 0`` entry into it while the upper bounds of the entries outside sum to
-    less than ``limit``. States without candidate rows never join. Returns ``(mask,
-    leaked)``: the candidate rows that do not leak keep every run outside the set (under
-    every adversary, or the cooperating one)."""
-    n_rows = row_ptr.size - 1
-    x = start.copy()
-    left = np.zeros(x.size, dtype=np.int64)
-    leaked = np.zeros(n_rows, dtype=np.bool_)
-    must = np.zeros(n_rows, dtype=np.bool_)
-    touches = np.zeros(n_rows, dtype=np.bool_)
-    outside_up = np.zeros(n_rows)
-    queue = np.empty(x.size, dtype=np.int64)
-    tail = 0
-    for r in range(n_rows):
-        if not cand[r]:
-            continue
-        left[row_state[r]] += 1
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            if x[successor[e]]:
-                if lower[e] > 0.0:
-                    must[r] = True
-                if upper[e] > 0.0:
-                    touches[r] = True
-            else:
-                outside_up[r] += upper[e]
-    for r in range(n_rows):
-        if not cand[r]:
-            continue
-        if touches[r] and (not cooperative or must[r] or outside_up[r] < limit):
-            leaked[r] = True
-            s = row_state[r]
-            left[s] -= 1
-            if left[s] == 0 and not x[s]:
-                x[s] = True
-                queue[tail] = s
-                tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            s = inc_state[k]
-            if x[s]:
-                continue
-            r = inc_row[k]
-            if not cand[r] or leaked[r]:
-                continue
-            if inc_lower[k] > 0.0:
-                must[r] = True
-            if inc_upper[k] > 0.0:
-                touches[r] = True
-            outside_up[r] -= inc_upper[k]
-            if touches[r] and (not cooperative or must[r] or outside_up[r] < limit):
-                leaked[r] = True
-                left[s] -= 1
-                if left[s] == 0:
-                    x[s] = True
-                    queue[tail] = s
-                    tail += 1
-    return x, leaked
+@numba.njit(cache=True, nogil=True, inline="always")
+def _lead(r, s, every_row, led, left, x, choice, queue, tail):
+    """Row ``r`` of state ``s`` leads into the set: ``s`` joins (queued) if that is
+    enough; the new queue length."""
+    led[r] = True
+    left[s] -= 1
+    if not every_row or left[s] == 0:
+        x[s] = True
+        choice[s] = r
+        queue[tail] = s
+        tail += 1
+    return tail
 
 
 @numba.njit(cache=True, nogil=True)
