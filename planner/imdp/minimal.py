@@ -18,6 +18,8 @@ certified machinery (interval iteration with end components, strategy iteration;
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from planner.imdp import graph
@@ -83,8 +85,10 @@ def dual_reach(
     ``x >= 0.5`` and off by at most half an ulp of 1 below it) and exact on the settled
     ones."""
     dual_val = np.where(fixed, 1.0 - fixed_val, 0.0)
-    r = reach_values(m, free_rows, dual_val, not adversary_minimizes, True, alg)
     slack = np.finfo(float).eps / 2
+    # the dual closes its bracket within the tolerance less the rounding added below
+    inner = replace(alg, tolerance=max(alg.tolerance - 2 * slack, alg.tolerance / 2))
+    r = reach_values(m, free_rows, dual_val, not adversary_minimizes, True, inner)
     lower = np.where(fixed, fixed_val, np.maximum(0.0, 1.0 - r.upper - slack))
     upper = np.where(fixed, fixed_val, np.minimum(1.0, 1.0 - r.lower + slack))
     return lower, upper, r

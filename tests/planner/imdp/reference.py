@@ -45,6 +45,30 @@ def random_imdp(
     )
 
 
+def sticky_imdp(rng: np.random.Generator, n: int) -> IMDP:
+    """One action per state, half the states with a self-loop, every lower bound positive:
+    mass circulates long among states of nearly equal value."""
+    s, t, lo, up = [], [], [], []
+    for q in range(n):
+        k = int(rng.integers(1, 4))
+        succ = rng.choice(n, size=k, replace=False)
+        if rng.random() < 0.5 and q not in succ:
+            succ[0] = q
+        p = rng.dirichlet(np.ones(k))
+        lower = np.maximum(p * rng.uniform(0.2, 1.0, size=k), 1e-3)
+        lower = lower / max(1.0, lower.sum() / 0.999)
+        upper = np.maximum(np.minimum(1.0, p + rng.uniform(0.0, 0.3, size=k)), lower)
+        if upper.sum() < 1.0:
+            upper = np.minimum(1.0, upper / upper.sum() * 1.001)
+        s += [q] * k
+        t += succ.tolist()
+        lo += lower.tolist()
+        up += upper.tolist()
+    kind = rng.random(n)
+    labels = [("goal",) if x < 0.15 else ("bad",) if x < 0.35 else () for x in kind]
+    return IMDP(n, s, [0] * len(s), t, lo, up, labels=labels, propositions=("bad", "goal"))
+
+
 def rows_of(model: IMDP) -> dict[tuple[int, int], list[tuple[int, float, float]]]:
     out: dict[tuple[int, int], list[tuple[int, float, float]]] = {}
     s, a, t, lo, up = model.coo()

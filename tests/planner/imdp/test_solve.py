@@ -21,6 +21,7 @@ from tests.planner.imdp.reference import (
     ref_reach_by_strategies,
     ref_strategy_value,
     slow_leak_imdp,
+    sticky_imdp,
 )
 
 solve_module = importlib.import_module("planner.imdp.reachability")
@@ -427,37 +428,13 @@ def test_min_reach_is_certified_and_keeps_its_zero_states(zero_lower, sat):
     assert hovering > 0  # the models have such states
 
 
-def _sticky_imdp(rng: np.random.Generator, n: int) -> IMDP:
-    """One action per state, half the states with a self-loop, every lower bound positive:
-    mass circulates long among states of nearly equal value."""
-    s, t, lo, up = [], [], [], []
-    for q in range(n):
-        k = int(rng.integers(1, 4))
-        succ = rng.choice(n, size=k, replace=False)
-        if rng.random() < 0.5 and q not in succ:
-            succ[0] = q
-        p = rng.dirichlet(np.ones(k))
-        lower = np.maximum(p * rng.uniform(0.2, 1.0, size=k), 1e-3)
-        lower = lower / max(1.0, lower.sum() / 0.999)
-        upper = np.maximum(np.minimum(1.0, p + rng.uniform(0.0, 0.3, size=k)), lower)
-        if upper.sum() < 1.0:
-            upper = np.minimum(1.0, upper / upper.sum() * 1.001)
-        s += [q] * k
-        t += succ.tolist()
-        lo += lower.tolist()
-        up += upper.tolist()
-    kind = rng.random(n)
-    labels = [("goal",) if x < 0.15 else ("bad",) if x < 0.35 else () for x in kind]
-    return IMDP(n, s, [0] * len(s), t, lo, up, labels=labels, propositions=("bad", "goal"))
-
-
 @pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
 def test_min_reach_of_slowly_mixing_chains_is_certified(sat):
     # minimal reachability is solved as the maximal reachability of the value-0 states:
     # its bound from above closes where sweeps from 1 alone crept for ever
     rng = np.random.default_rng(3)
     for _ in range(5):
-        m = _sticky_imdp(rng, 120)
+        m = sticky_imdp(rng, 120)
         spec = Specification(ReachAvoid("goal", "bad"), sat, "minimize")
         sol = solve(Problem(m, spec))
         assert sol.converged and sol.error < 1e-8

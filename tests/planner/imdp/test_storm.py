@@ -12,13 +12,19 @@ import pytest
 
 from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteration, solve
 from planner.imdp.io import write_drn
-from tests.planner.imdp.reference import random_imdp
+from tests.planner.imdp.reference import random_imdp, sticky_imdp
 
 stormpy = pytest.importorskip(
     "stormpy",
     reason="stormpy is not installed (it is a dev dependency: pip install -e '.[dev]'; its "
     "wheel exists for CPython 3.11 on x86-64 Linux)",
 )
+
+
+def _model(kind: str, seed: int) -> IMDP:
+    if kind == "sticky":  # slowly mixing chains: mass circulates long, every lower bound > 0
+        return sticky_imdp(np.random.default_rng(seed), 120)
+    return _positive_lower_model(seed)
 
 
 def _positive_lower_model(seed: int) -> IMDP:
@@ -38,19 +44,22 @@ def _positive_lower_model(seed: int) -> IMDP:
     )
 
 
-@pytest.mark.parametrize("seed", [41, 7])
+@pytest.mark.parametrize(("kind", "seed"), [("random", 41), ("random", 7), ("sticky", 2)])
+@pytest.mark.parametrize("strategy", ["maximize", "minimize"])
 @pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
-def test_values_agree_with_storm(tmp_path, sat, seed):
-    m = _positive_lower_model(seed)
+def test_values_agree_with_storm(tmp_path, sat, strategy, kind, seed):
+    m = _model(kind, seed)
     path = tmp_path / "m.drn"
     write_drn(m, path)
     model = stormpy.build_model_from_drn[stormpy.Interval](str(path))
     assert model.nr_states == m.n_states
-    prop = stormpy.parse_properties('Pmax=? [!"bad" U "goal"]')[0]
+    opt = "max" if strategy == "maximize" else "min"
+    prop = stormpy.parse_properties(f'P{opt}=? [!"bad" U "goal"]')[0]
     env = stormpy.Environment()
     minmax = env.solver().min_max()
     minmax.method = stormpy.environments.MinMaxMethod.VALUE_ITERATION
-    minmax.precision = stormpy.Rational(1e-10)
+    minmax.precision = stormpy.Rational(1e-12)
+    minmax.relative_termination_criterion = False
     mode = (
         stormpy.UncertaintyResolutionMode.ROBUST
         if sat == "pessimistic"
@@ -64,11 +73,14 @@ def test_values_agree_with_storm(tmp_path, sat, seed):
         environment=env,
     )
     storm_values = np.array([result.get_value(i) for i in range(m.n_states)])
-    ours = solve(
-        Problem(m, Specification(ReachAvoid("goal", "bad"), sat)), ValueIteration(1e-12)
-    ).values
+    sol = solve(
+        Problem(m, Specification(ReachAvoid("goal", "bad"), sat, strategy)), ValueIteration(1e-10)
+    )
     assert 0.0 < storm_values.max() and storm_values.min() < 1.0  # not a trivial model
-    assert ours == pytest.approx(storm_values, abs=1e-8)
+    assert sol.values == pytest.approx(storm_values, abs=1e-8)
+    # certified, and Storm (at 1e-12) within the bracket up to its own precision
+    assert sol.converged
+    assert np.all(sol.lower <= storm_values + 1e-9) and np.all(storm_values <= sol.upper + 1e-9)
 
 
 def test_worst_case_is_below_best_case_in_storm(tmp_path):
