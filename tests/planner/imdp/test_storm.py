@@ -1,10 +1,11 @@
 """Cross-check robust reachability against Storm (stormpy 2.0, a dev dependency).
 
 Storm 2.0 refuses reachability on interval models with a zero lower bound ("requires
-graph-preservation"), so the model here has all lower bounds positive. The model goes through
+graph-preservation"), so the models here have all lower bounds positive: random ones and a
+slowly mixing chain (:func:`tests.planner.imdp.reference.sticky_imdp`). Each goes through
 our DRN writer and Storm's own DRN parser (``build_model_from_drn[stormpy.Interval]``), then
 ``model_checking(..., uncertainty_resolution_mode=ROBUST | COOPERATIVE)`` with Storm's robust
-value iteration to 1e-10.
+value iteration to 1e-12 (absolute), for ``Pmax`` and ``Pmin``.
 """
 
 import numpy as np
