@@ -40,7 +40,7 @@ V_sigma)`` soundly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -312,27 +312,64 @@ def reach_values(
     alg: ValueIteration,
 ) -> ReachResult:
     """Reachability values of the free states by sweeps from below and a certified upper
-    bound (see the module docstring); ``fixed_val`` holds the settled states' values."""
+    bound (see the module docstring); ``fixed_val`` holds the settled states' values.
+
+    When the bracket closed but the rounding widening then opened it again (at tolerances
+    near ``1e-12``, where the widening of long stays is a sizeable part of the tolerance),
+    the solve runs once more to ``_RETRY_FRACTION`` of the tolerance."""
     if free_rows.size == 0:
         v = fixed_val.copy()
         return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0)
+    result, closed = _reach_once(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+    if closed and _width(result) >= alg.tolerance:
+        inner = replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION)
+        again, _ = _reach_once(m, free_rows, fixed_val, adversary_minimizes, maximize, inner)
+        # the counts are of both solves
+        again.iterations += result.iterations
+        again.evaluations += result.evaluations
+        again.upper_sweeps += result.upper_sweeps
+        if _width(again) < _width(result):
+            result = again
+    return result
+
+
+_RETRY_FRACTION = 0.25
+"""The tolerance of the second solve when the widening opened a closed bracket."""
+
+
+def _width(result: ReachResult) -> float:
+    return float(np.max(result.upper - result.lower, initial=0.0))
+
+
+def _reach_once(
+    m: IMDP,
+    free_rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    maximize: bool,
+    alg: ValueIteration,
+) -> tuple[ReachResult, bool]:
+    """One solve: the result (certified: widened for rounding), and whether the bracket
+    was below the tolerance before the widening."""
     run = _ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
     if not (alg.certified and maximize and adversary_minimizes and run.interval_iteration()):
         run.sweeps()
         run.fallback()
     result = run.result()
-    if alg.certified:
-        result.upper = rounding_widened(
-            m,
-            free_rows,
-            result.lower,
-            result.upper,
-            adversary_minimizes,
-            maximize,
-            alg.tolerance,
-            run.sweeper,
-        )
-    return result
+    if not alg.certified:
+        return result, False
+    closed = _width(result) < alg.tolerance
+    result.upper = rounding_widened(
+        m,
+        free_rows,
+        result.lower,
+        result.upper,
+        adversary_minimizes,
+        maximize,
+        alg.tolerance,
+        run.sweeper,
+    )
+    return result, closed
 
 
 def rounding_widened(

@@ -443,3 +443,22 @@ def test_min_reach_of_slowly_mixing_chains_is_certified(sat):
         tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
         ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=sat == "pessimistic", maximize=False)
         assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+
+
+def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
+    # at a tolerance of 1e-12 the widening for the rounding of long stays can push a
+    # closed bracket over it (this chain: 1.012e-12); the solve then runs to a quarter of
+    # the tolerance and reports the sweeps of both runs
+    m = sticky_imdp(np.random.default_rng(3), 120)
+    spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
+    once = solve_module._reach_once
+    calls = []
+
+    def counted(*args):
+        calls.append(args[-1].tolerance)
+        return once(*args)
+
+    monkeypatch.setattr(solve_module, "_reach_once", counted)
+    sol = solve(Problem(m, spec), ValueIteration(1e-12))
+    assert sol.converged and sol.error < 1e-12
+    assert len(calls) == 2 and calls[1] == pytest.approx(calls[0] / 4)
