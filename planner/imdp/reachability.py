@@ -320,10 +320,13 @@ def reach_values(
     if free_rows.size == 0:
         v = fixed_val.copy()
         return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0)
-    result, closed = _reach_once(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+
+    def solved(a: ValueIteration) -> tuple[ReachResult, bool]:
+        return _reach_once(_ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, a))
+
+    result, closed = solved(alg)
     if closed and _width(result) >= alg.tolerance:
-        inner = replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION)
-        again, _ = _reach_once(m, free_rows, fixed_val, adversary_minimizes, maximize, inner)
+        again, _ = solved(replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION))
         # the counts are of both solves
         again.iterations += result.iterations
         again.evaluations += result.evaluations
@@ -341,18 +344,13 @@ def _width(result: ReachResult) -> float:
     return float(np.max(result.upper - result.lower, initial=0.0))
 
 
-def _reach_once(
-    m: IMDP,
-    free_rows: np.ndarray,
-    fixed_val: np.ndarray,
-    adversary_minimizes: bool,
-    maximize: bool,
-    alg: ValueIteration,
-) -> tuple[ReachResult, bool]:
+def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
     """One solve: the result (certified: widened for rounding), and whether the bracket
     was below the tolerance before the widening."""
-    run = _ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
-    if not (alg.certified and maximize and adversary_minimizes and run.interval_iteration()):
+    alg = run.alg
+    if not (
+        alg.certified and run.maximize and run.adversary_minimizes and run.interval_iteration()
+    ):
         run.sweeps()
         run.fallback()
     result = run.result()
@@ -360,12 +358,12 @@ def _reach_once(
         return result, False
     closed = _width(result) < alg.tolerance
     result.upper = rounding_widened(
-        m,
-        free_rows,
+        run.m,
+        run.free_rows,
         result.lower,
         result.upper,
-        adversary_minimizes,
-        maximize,
+        run.adversary_minimizes,
+        run.maximize,
         alg.tolerance,
         run.sweeper,
     )

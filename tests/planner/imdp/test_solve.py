@@ -454,9 +454,9 @@ def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
     once = solve_module._reach_once
     calls = []
 
-    def counted(*args):
-        calls.append(args[-1].tolerance)
-        return once(*args)
+    def counted(run):
+        calls.append(run.alg.tolerance)
+        return once(run)
 
     monkeypatch.setattr(solve_module, "_reach_once", counted)
     sol = solve(Problem(m, spec), ValueIteration(1e-12))
