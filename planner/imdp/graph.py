@@ -161,10 +161,7 @@ def possible_reach(
 
     Backward breadth-first search over ``upper > 0`` edges (one pass, ``O(entries)``).
     """
-    rows = _all_rows(model, rows)
-    target = np.asarray(target, dtype=bool)
-    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
-    rows = rows & (~avoid & ~target)[model.row_state]
+    target, rows = reach_rows(model, target, avoid, rows)
     ptr, inc_row, inc_state, _, inc_upper = model.reverse_index()
     dist = backward_distance(target, rows, ptr, inc_row, inc_state, inc_upper)
     return dist < np.inf
@@ -200,11 +197,19 @@ def robust_positive_reach(
     Returns ``(mask, row)``: ``row[s]`` is a row of ``s`` that forces positive mass one
     layer closer to ``target`` (-1 for targets and states outside the set).
     """
+    target, cand = reach_rows(model, target, avoid, rows)
+    return _attractor(model, target.copy(), cand)
+
+
+def reach_rows(
+    model: IMDP, target: np.ndarray, avoid: np.ndarray | None, rows: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(target, rows)`` of a ``(!avoid) U target`` search: the target as a mask, and the
+    allowed rows (all by default) of the states neither in ``target`` nor in ``avoid``."""
     rows = _all_rows(model, rows)
     target = np.asarray(target, dtype=bool)
     avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
-    cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
-    return _attractor(model, target.copy(), cand)
+    return target, rows & (~avoid & ~target)[model.row_state]
 
 
 def _attractor(

@@ -53,13 +53,10 @@ def unavoidable_reach(
     so that settling it at 0 keeps an upper bound sound. ``avoid`` states and states
     without rows never join (a run there never reaches ``target``).
     """
-    rows = graph._all_rows(model, rows)
-    target = np.asarray(target, dtype=bool)
-    avoid = np.zeros(model.n_states, dtype=bool) if avoid is None else np.asarray(avoid, bool)
-    cand = rows & ~avoid[model.row_state] & ~target[model.row_state]
     m = model
+    target, cand = graph.reach_rows(m, target, avoid, rows)
     mask, _, led = attractor(
-        target.copy(), np.asarray(cand, bool), *graph.attractor_arrays(m), 1.0, True, cooperative
+        target.copy(), cand, *graph.attractor_arrays(m), 1.0, True, cooperative
     )
     staying = np.flatnonzero(cand & ~led & ~mask[m.row_state])
     row = np.full(m.n_states, -1, dtype=np.int64)

@@ -327,12 +327,12 @@ def reach_values(
     result, closed = solved(alg)
     if closed and _width(result) >= alg.tolerance:
         again, _ = solved(replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION))
-        # the counts are of both solves
-        again.iterations += result.iterations
-        again.evaluations += result.evaluations
-        again.upper_sweeps += result.upper_sweeps
-        if _width(again) < _width(result):
-            result = again
+        kept = again if _width(again) < _width(result) else result
+        # the counts are of both solves, whichever is kept
+        kept.iterations = result.iterations + again.iterations
+        kept.evaluations = result.evaluations + again.evaluations
+        kept.upper_sweeps = result.upper_sweeps + again.upper_sweeps
+        result = kept
     return result
 
 

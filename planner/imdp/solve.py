@@ -98,7 +98,7 @@ def _settled(
     pessimistic: bool,
     precompute: bool,
     target_closed: bool = False,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The states of a reach-avoid problem settled before iterating: ``(settled, value,
     choice)``: targets, avoided states and (with ``precompute``) the states of value 0
     and, worst case maximising or minimising, of value 1 by graph analysis; ``choice`` the
