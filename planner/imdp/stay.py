@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from planner.imdp.evaluate import DUST, SOLVE_MARGIN, chain_lu, reaching, row_rounding
+from planner.imdp.evaluate import SOLVE_MARGIN, chain_lu, reaching, row_rounding
 from planner.imdp.kernels import counting_order, surest_exit_choice
 from planner.imdp.model import first_of_runs, run_ids
 
@@ -61,8 +61,7 @@ def chain_stay_allowance(
             out[states] = (1.0 + SOLVE_MARGIN) * float(np.max(a)) * stay[states]
         return out
     inner = matrix[:, states].tocsr()
-    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
-    transient = reaching(inner, leak > DUST)
+    transient = reaching(inner, leaving_mass(matrix, states) > 0.0)
     idx = np.flatnonzero(transient)
     if idx.size:
         sub = inner[idx][:, idx]
@@ -74,9 +73,23 @@ def chain_stay_allowance(
     return out
 
 
-def _inner_rows(matrix: sp.csr_matrix, row_states: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+def leaving_mass(matrix: sp.csr_matrix, states: np.ndarray) -> np.ndarray:
+    """Per row of ``matrix`` (distributions over all states) the mass of its entries
+    outside ``states``: what the chain hands to the settled states, however small. Not
+    ``1 - `` the mass inside: a distribution computed in floating point may sum to
+    ``1 - 1e-16`` without leading anywhere, while a real entry of ``1e-13`` towards a
+    target is left within ``1e13`` steps (and may carry the whole value there)."""
+    outside = np.ones(matrix.shape[1])
+    outside[np.asarray(states, dtype=np.int64)] = 0.0
+    return sp.csr_matrix(matrix) @ outside
+
+
+def _inner_rows(
+    matrix: sp.csr_matrix, row_states: np.ndarray
+) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     """The candidate rows restricted to their own states (mass elsewhere leaves), columns
-    renumbered in state order, and those states."""
+    renumbered in state order, those states, and each row's mass leaving them
+    (:func:`leaving_mass`)."""
     rs = np.asarray(row_states, dtype=np.int64)
     states = rs[first_of_runs(rs)]
     matrix = sp.csr_matrix(matrix)
@@ -87,7 +100,7 @@ def _inner_rows(matrix: sp.csr_matrix, row_states: np.ndarray) -> tuple[sp.csr_m
     inner = sp.csr_matrix(
         (inner.data, pos[cols][inner.indices], inner.indptr), shape=(rs.size, states.size)
     )
-    return inner, states
+    return inner, states, leaving_mass(matrix, states)
 
 
 def surest_exit_start(
@@ -100,9 +113,7 @@ def surest_exit_start(
     towards the exit), a good start for :func:`shortest_stay`; ``fallback`` (a
     candidate index per state) where no path leaves, -1 there without one. Returns
     candidate indices."""
-    inner, states = _inner_rows(matrix, row_states)
-    leak = 1.0 - np.asarray(inner.sum(axis=1)).ravel()
-    leak[leak <= DUST] = 0.0
+    inner, states, leak = _inner_rows(matrix, row_states)
     local = run_ids(np.asarray(row_states, dtype=np.int64))
     coo = inner.tocoo()
     order, ptr = counting_order(coo.col.astype(np.int64), states.size)
@@ -201,7 +212,7 @@ def shortest_stay(
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
-    inner, states = _inner_rows(matrix, rs)
+    inner, states, leaving = _inner_rows(matrix, rs)
     choice = np.asarray(start, dtype=np.int64)
 
     def evaluated(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -211,8 +222,7 @@ def shortest_stay(
 
     for _ in range(rounds):
         sub = inner[choice]
-        leak = 1.0 - np.asarray(sub.sum(axis=1)).ravel()
-        live = reaching(sub, leak > DUST)
+        live = reaching(sub, leaving[choice] > 0.0)
         w = np.full(states.size, _NEVER)
         idx = np.flatnonzero(live)
         if idx.size:

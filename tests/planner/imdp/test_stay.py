@@ -215,3 +215,57 @@ def test_shortest_stay_settles_on_the_block_bound_within_the_limit():
     choice, stay = shortest_stay(matrix, rs, start, limit=1e9, block_limit=0.0)
     assert np.array_equal(choice, start)
     np.testing.assert_allclose(stay[:n], exact, rtol=1e-10)
+
+
+def _tiny_exit_chain(goal: float, bad: float):
+    """One free state that keeps ``1 - goal - bad`` and leaves with ``goal`` to a target
+    and ``bad`` to a trap; point intervals, exact value ``goal / (goal + bad)``."""
+    from planner.imdp import IMDP
+
+    keep = 1.0 - goal - bad
+    s, t, p = [0, 0, 0, 1, 2], [0, 1, 2, 1, 2], [keep, goal, bad, 1.0, 1.0]
+    labels = [(), ("goal",), ("bad",)]
+    return IMDP(3, s, [0] * 5, t, p, p, labels=labels, propositions=("bad", "goal")), keep
+
+
+@pytest.mark.parametrize(("goal", "bad"), [(2.0**-50, 6.87e-13), (2.0**-51, 5e-13)])
+def test_exits_below_1e_12_per_step_count_as_exits(goal, bad):
+    # Leaving with under 1e-12 per step is still leaving (within ~1e12 steps), and it can
+    # carry the whole value: here about 1e-3, gained at under 1e-15 per step, which the
+    # checks' rounding allowance hides. The widening must sum that allowance over the stay;
+    # it once treated such states as never leaving (value 0, no allowance) and certified
+    # [6e-14, 2.5e-9].
+    from fractions import Fraction
+
+    from planner.imdp import Problem, ReachAvoid, Specification, solve
+    from planner.imdp.ordering import OrderingAdversary
+    from planner.imdp.stay import chain_stay_allowance
+
+    m, keep = _tiny_exit_chain(goal, bad)
+    exact = Fraction(goal) / (1 - Fraction(keep))
+    sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+    assert Fraction(sol.lower[0]) <= exact <= Fraction(sol.upper[0])
+    assert not sol.converged  # 1e-15 per step over ~1e12 steps: no 1e-8 bracket
+    # the allowance itself: the noise summed over the expected stay
+    rows = np.array([0])
+    upper = np.array([1e-9, 1.0, 0.0])
+    chain = OrderingAdversary(m, True, rows=rows).matrix(upper)
+    allowance = chain_stay_allowance(chain, m.row_state[rows], upper, 1e-15)
+    assert allowance[0] >= 1e-15 / (1.0 - keep)
+
+
+def test_float_leftover_of_a_closed_class_is_not_an_exit():
+    # a distribution that sums to 1 - 1e-16 in floating point leads nowhere: the class
+    # it keeps is closed, its value 0, and it takes no allowance
+    from planner.imdp.stay import chain_stay_allowance
+
+    short = 0.25 - 2.0**-53  # the rows sum to 1 - 2^-53
+    chain = sp.csr_matrix(np.array([[0.5, 0.25, short, 0.0]] * 3))
+    assert chain[0].sum() < 1.0
+    upper = np.array([0.5, 0.5, 0.5, 1.0])
+    allowance = chain_stay_allowance(chain, np.array([0, 1, 2]), upper, 1e-15)
+    assert np.all(allowance == 0.0)
+    # one real entry of 1e-300 towards the target opens the class
+    chain = sp.csr_matrix(np.array([[0.5, 0.25, short, 1e-300]] * 3))
+    allowance = chain_stay_allowance(chain, np.array([0, 1, 2]), upper, 1e-15)
+    assert np.all(allowance[:3] > 0.0)
