@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import connected_components
 
 from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
+from planner.imdp.kernels.verify import raise_pass
 from planner.imdp.model import IMDP, row_entries
 from planner.modes import Adversary
 
@@ -52,6 +53,49 @@ def check_upper(
             return False, k
         last = bad
     return False, passes
+
+
+VERIFY_PASSES = 16
+"""Passes of :func:`verify_upper` before it gives up."""
+
+
+def verify_upper(
+    model: IMDP,
+    free_rows: np.ndarray,
+    u: np.ndarray,
+    maximize: bool,
+    adversary_minimizes: bool,
+    passes: int = VERIFY_PASSES,
+) -> tuple[bool, np.ndarray]:
+    """``(shown, U')``: ``U' >= u`` with ``T(U') <= U'`` shown in exact arithmetic on the
+    states of ``free_rows`` (every other state's value is exact), so ``U' >= V*``
+    (Knaster-Tarski) whatever floating point did before, for the interval polytopes of
+    the rows with the model's ``tolerance`` on the critical entry of a minimising
+    adversary (the slack with which the model accepted rows that bracket 1); ``shown``
+    is ``False`` when
+    ``passes`` passes of :func:`planner.imdp.kernels.verify.raise_pass` (each raising
+    the states where a row may exceed ``U``) left violations, or when their number
+    stopped falling over two passes (mass that circulates among states of nearly equal
+    value for very long turns a violation of an ulp into a rise of an ulp per pass)."""
+    m = model
+    out = np.array(u, dtype=np.float64, copy=True)
+    rows = np.asarray(free_rows, dtype=np.int64)
+    if rows.size == 0:
+        return True, out
+    rs = m.row_state[rows]
+    seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1])))
+    state_rows = np.append(seg, rows.size).astype(np.int64)
+    args = (rs[seg], state_rows, rows, m.row_ptr, m.successor, m.lower, m.upper, out)
+    last, stalled = None, 0
+    for _ in range(passes):
+        raised = raise_pass(*args, maximize, adversary_minimizes, float(m.tolerance))
+        if raised == 0:
+            return True, out
+        stalled = stalled + 1 if last is not None and raised >= last else 0
+        if stalled >= 2:
+            break
+        last = raised
+    return False, out
 
 
 def optimistic_candidate(

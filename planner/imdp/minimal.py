@@ -80,12 +80,15 @@ def dual_reach(
 
     The bracket is rounded outwards on the free states (``1 - x`` is exact for
     ``x >= 0.5`` and off by at most half an ulp of 1 below it) and exact on the settled
-    ones."""
+    ones. Where the dual's upper bound was not shown in exact arithmetic
+    (:attr:`ReachResult.verified`) the lower bound is 0 on the free states."""
     dual_val = np.where(fixed, 1.0 - fixed_val, 0.0)
     slack = np.finfo(float).eps / 2
     # the dual closes its bracket within the tolerance less the rounding added below
     inner = replace(alg, tolerance=max(alg.tolerance - 2 * slack, alg.tolerance / 2))
     r = reach_values(m, free_rows, dual_val, not adversary_minimizes, True, inner)
-    lower = np.where(fixed, fixed_val, np.maximum(0.0, 1.0 - r.upper - slack))
+    # the dual's upper bound is a proof only where it was shown in exact arithmetic
+    shown = np.maximum(0.0, 1.0 - r.upper - slack) if r.verified else 0.0
+    lower = np.where(fixed, fixed_val, shown)
     upper = np.where(fixed, fixed_val, np.minimum(1.0, 1.0 - r.lower + slack))
     return lower, upper, r

@@ -204,9 +204,15 @@ class Solution:
             minimising strategy, the value is at most ``upper``). Discounted reward: the
             centre of the bracket.
         lower, upper: ``(n_states,)`` the certified bracket, ``lower <= V* <= upper`` for
-            the optimal values ``V*`` (up to floating-point rounding, ~1e-15). With the
-            uncertified mode ``upper`` is only the trivial bound (1 for reachability; for
-            discounted reward the residual bound, which is sound for that property).
+            the optimal values ``V*``. For reachability the bound from above (of a
+            maximal problem; of a minimal one, its dual's, which gives ``lower``) counts
+            only once shown superharmonic in exact arithmetic
+            (:func:`planner.imdp.certify.verify_upper`); where it was not, the solution
+            is not ``converged``, a maximal problem's ``upper`` is the iteration's bound
+            with a floating-point allowance that is not proven, and a minimal problem's
+            ``lower`` is 0 on the free states. With the uncertified mode ``upper`` is
+            only the trivial bound (1 for reachability; for discounted reward the
+            residual bound, which is sound for that property).
         strategy: ``(n_states,)`` chosen action per state (-1: none; targets, avoided
             states, states without allowed actions and states settled by graph analysis
             where the action does not matter; a maximising strategy's value-1 states and

@@ -247,7 +247,9 @@ def robust_satisfaction(
     choice[win] = win_row[win]
     if not _stays_accepting_outside(m, good, bad, win, rows):
         # every satisfying run enters the almost-sure region: a reachability
-        return _solution(m, choice, reach.lower, reach.upper, reach, 0, rows, alg.tolerance)
+        return _solution(
+            m, choice, reach.lower, reach.upper, reach, 0, rows, alg.tolerance, reach.converged
+        )
     lower, upper = evaluate_strategy(m, choice, good, bad, alg)
     evaluations = 1
     all_rows = np.ones(m.n_rows, dtype=bool) if rows is None else rows
@@ -330,7 +332,10 @@ def _solution(
     evaluations: int,
     rows: np.ndarray | None,
     tolerance: float,
+    shown: bool = True,
 ) -> Solution:
+    """``shown``: the bracket's bound from above was proven (a reachability solve's
+    ``converged``); only then can it count as converged."""
     strategy = np.where(choice >= 0, m.row_action[np.maximum(choice, 0)], -1)
     lower = np.clip(lower, 0.0, 1.0)
     upper = np.clip(np.maximum(upper, lower), 0.0, 1.0)
@@ -345,7 +350,7 @@ def _solution(
         strategy=strategy,
         residual=reach.residual,
         iterations=reach.iterations,
-        converged=bool(np.max(upper - lower, initial=0.0) < tolerance),
+        converged=shown and bool(np.max(upper - lower, initial=0.0) < tolerance),
         evaluations=reach.evaluations + evaluations,
         fixed=reach.fixed,
         lower=lower,

@@ -130,12 +130,15 @@ class ReachResult:
     """The outcome of :func:`reach_values`.
 
     Attributes:
-        lower, upper: the bracket (``upper`` certified superharmonic when certified).
+        lower, upper: the bracket.
         residual: the last sweep's change; iterations: sweeps from below.
         sigma: the last strategy iteration's optimal strategy (one row per free state) or
             ``None``.
         evaluations: strategy evaluations; q: the robust value of every free row under
             ``lower``; upper_sweeps: passes from above.
+        verified: ``upper`` was shown superharmonic in exact arithmetic
+            (:func:`planner.imdp.certify.verify_upper`), hence an upper bound; only then
+            does a closed bracket count as certified.
     """
 
     lower: np.ndarray
@@ -146,6 +149,7 @@ class ReachResult:
     evaluations: int
     q: np.ndarray
     upper_sweeps: int
+    verified: bool = False
 
 
 class _ReachSweeps:
@@ -319,7 +323,7 @@ def reach_values(
     the solve runs once more to ``_RETRY_FRACTION`` of the tolerance."""
     if free_rows.size == 0:
         v = fixed_val.copy()
-        return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0)
+        return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0, verified=True)
 
     def solved(a: ValueIteration) -> tuple[ReachResult, bool]:
         return _reach_once(_ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, a))
@@ -357,7 +361,7 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
     if not alg.certified:
         return result, False
     closed = _width(result) < alg.tolerance
-    result.upper = rounding_widened(
+    widened = rounding_widened(
         run.m,
         run.free_rows,
         result.lower,
@@ -367,6 +371,10 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
         alg.tolerance,
         run.sweeper,
     )
+    result.verified, shown = certify.verify_upper(
+        run.m, run.free_rows, widened, run.maximize, run.adversary_minimizes
+    )
+    result.upper = shown if result.verified else widened
     return result, closed
 
 

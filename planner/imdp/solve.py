@@ -205,7 +205,7 @@ def solve_with(
         v, residual, it, sigma = lower.copy(), r.residual, r.iterations, r.sigma
         evaluations, q_free, upper_sweeps = r.evaluations, r.q, r.upper_sweeps
         converged = (
-            bool(np.max(upper - lower, initial=0.0) < alg.tolerance)
+            bool(np.max(upper - lower, initial=0.0) < alg.tolerance) and r.verified
             if alg.certified
             else bool(residual < alg.tolerance)
         )

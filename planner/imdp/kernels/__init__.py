@@ -1,7 +1,8 @@
 """Compiled (numba) kernels for the sequential parts of robust value iteration and of the
 graph analyses: the robust expectation of a row (:mod:`.rows`), Gauss-Seidel sweeps and
 their layout (:mod:`.sweeps`), end components (:mod:`.components`), graph searches
-(:mod:`.search`) and double-double residuals of strategy evaluation (:mod:`.exact`)."""
+(:mod:`.search`), double-double residuals of strategy evaluation (:mod:`.exact`) and the
+superharmonicity check in exact arithmetic (:mod:`.verify`)."""
 
 from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
 from planner.imdp.kernels.exact import chain_residual

@@ -1,11 +1,15 @@
-"""The first synthesis of every shipped scenario (the prior landing-error model, no data)
-is certified: the worst-case bracket closes at the default settings, for the runner's
-product-interval abstraction and for the decoupled one built from the same bounds.
+"""The first synthesis of every shipped scenario (the prior landing-error model, no data):
+the worst-case bracket closes at the default settings, for the runner's product-interval
+abstraction and for the decoupled one built from the same bounds, and is certified where
+its bound from above is shown superharmonic in exact arithmetic.
 
 On scenarios b and d the prior's intervals have zero lower bounds almost everywhere and tiny
 forced ones (1e-11 .. 1e-7), so the values from below are ~1e-38 and move by ~1e-11 per
 sweep while the bound from above sits at 1 on 190 of the 225 free states (an end component
 whose exits read its own upper bound); interval iteration stalls with every state wide.
+There the product's bound from above closes the bracket but is not shown in exact
+arithmetic (a pocket of values near 1e-38 where each state raised by an ulp makes the next
+one violate), so that bracket is not certified.
 """
 
 import numpy as np
@@ -21,8 +25,10 @@ from planner.ltl.translate import translate
 from planner.scenario import load_scenario
 
 
-@pytest.mark.parametrize("name", ["a", "b", "c", "d"])
-def test_prior_abstraction_is_certified(name):
+@pytest.mark.parametrize(
+    ("name", "product_shown"), [("a", True), ("b", False), ("c", True), ("d", False)]
+)
+def test_prior_abstraction_is_certified(name, product_shown):
     sc = load_scenario(name)
     runner = NavigationRunner(sc)
     gp = LandingErrorGP(runner.gp_settings)
@@ -34,11 +40,11 @@ def test_prior_abstraction_is_certified(name):
     decoupled = DecoupledProduct(
         grid_decoupled_model(grid, bounds, settings.noise), translate(sc.formula)
     )
-    for sol, initial in (
-        (satisfaction(product), product.initial),
-        (decoupled.satisfaction(), decoupled.initial),
+    for sol, initial, shown in (
+        (satisfaction(product), product.initial, product_shown),
+        (decoupled.satisfaction(), decoupled.initial, True),
     ):
-        assert sol.converged
+        assert sol.converged == shown
         assert sol.error < 1e-8
         assert np.all(sol.lower <= sol.upper)
         # no data: nothing is guaranteed at the start

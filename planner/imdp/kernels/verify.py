@@ -1,0 +1,172 @@
+"""A superharmonicity check whose rounding cannot hide a violation.
+
+For a reachability upper bound ``U`` and a row ``r`` of state ``s`` the kernels bound the
+*exact* excess ``T_r(U) - U(s)`` from above, ``T_r(U)`` the adversary's expectation of
+``U`` over the row's interval polytope ``{p : l <= p <= u, sum p = 1}``, computed in the
+form whose rounding scales with the value *differences* (not with the values, as a plain
+``sum p U`` does):
+
+* minimising adversary: the greedy vertex (successors by ascending ``U``: upper bounds
+  before the critical successor ``k``, lower bounds after, ``p_k = 1 - sum_{j != k} p_j``
+  exactly) has expectation ``U_k + sum_{j != k} p_j (U_j - U_k)``, an upper bound of the
+  minimum once ``l_k <= p_k <= u_k`` is verified with the rounding of the sum allowed for;
+* maximising adversary: for any ``lambda``, ``lambda + sum_{U_j > lambda} u_j (U_j -
+  lambda) + sum_{U_j < lambda} l_j (U_j - lambda)`` bounds the maximum from above (weak
+  duality), ``lambda`` the critical successor's value (where it is exact).
+
+Each difference is split exactly into its rounded value and its error (TwoSum), and the
+sum is taken up by ``(2n + 6)`` units of roundoff of the summed magnitudes, so the result
+is at least the exact excess. Where the values of a pocket are equal the excess is exactly
+0 and nothing is added: no allowance per step accumulates over long stays.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_UNIT = 2.0**-53
+"""Unit roundoff of double precision."""
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _two_diff(a: float, b: float) -> tuple[float, float]:
+    """``a - b`` as a rounded value and its exact error."""
+    s = a - b
+    bb = s - a
+    return s, (a - (s - bb)) - (b + bb)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _grow(e, m: int, b: float) -> int:
+    """Add ``b`` to the expansion ``e[:m]`` (non-overlapping components, smallest first)
+    without error (Shewchuk's grow-expansion, zero components dropped); its new length."""
+    q = b
+    k = 0
+    for i in range(m):
+        s = q + e[i]
+        bb = s - q
+        h = (q - (s - bb)) + (e[i] - bb)
+        q = s
+        if h != 0.0:
+            e[k] = h
+            k += 1
+    e[k] = q
+    return k + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _at_least(terms, n: int, e) -> bool:
+    """Whether the exact sum of ``terms[:n]`` is at least 0 (its expansion's leading
+    component decides)."""
+    m = 0
+    for i in range(n):
+        m = _grow(e, m, terms[i])
+    for i in range(m - 1, -1, -1):
+        if e[i] != 0.0:
+            return e[i] > 0.0
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, work) -> float:
+    """An upper bound of the exact ``T_r(U) - U(s)`` for the row with entries ``a:b``
+    (``us = U(s)``); ``inf`` where the minimising adversary's vertex is not feasible
+    within ``slack`` on its critical entry (the tolerance with which the model accepted
+    rows that bracket 1: point intervals written in floating point rarely sum to exactly
+    1), decided in exact arithmetic. ``idx``/``keys``: scratch as long as the row;
+    ``work``: scratch of twice that length plus 8."""
+    n = b - a
+    sign = 1.0 if minimizes else -1.0
+    for i in range(n):
+        k = sign * u[succ[a + i]]
+        j = i - 1
+        while j >= 0 and keys[j] > k:
+            keys[j + 1] = keys[j]
+            idx[j + 1] = idx[j]
+            j -= 1
+        keys[j + 1] = k
+        idx[j + 1] = a + i
+    # the critical position: the adversary's remaining mass runs out there
+    rem = 1.0
+    for i in range(n):
+        rem -= lower[idx[i]]
+    c = n - 1
+    for i in range(n):
+        e = idx[i]
+        g = upper[e] - lower[e]
+        if rem <= g:
+            c = i
+            break
+        rem -= g
+    uc = u[succ[idx[c]]]
+    if minimizes:
+        # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c]
+        # (up to ``slack``), both sides decided exactly
+        terms = work[: n + 3]
+        e = work[n + 3 :]
+        m = 0
+        for i in range(n):
+            if i != c:
+                terms[m] = -(upper[idx[i]] if i < c else lower[idx[i]])
+                m += 1
+        ec = idx[c]
+        terms[m] = 1.0
+        terms[m + 1] = slack
+        terms[m + 2] = -lower[ec]
+        if not _at_least(terms, m + 3, e):
+            return np.inf
+        for i in range(m):
+            terms[i] = -terms[i]
+        terms[m] = -1.0
+        terms[m + 2] = upper[ec]
+        if not _at_least(terms, m + 3, e):
+            return np.inf
+    total, tail = _two_diff(uc, us)
+    bound = abs(tail)
+    size = abs(total)
+    for i in range(n):
+        if i == c:
+            continue
+        e = idx[i]
+        # before the critical position: upper bounds (either adversary's greedy order)
+        p = upper[e] if i < c else lower[e]
+        d, de = _two_diff(u[succ[e]], uc)
+        t = p * d
+        total += t
+        size += abs(t)
+        bound += p * abs(de)
+    return total + bound + (2 * n + 6) * _UNIT * (size + bound)
+
+
+@numba.njit(cache=True, nogil=True)
+def raise_pass(
+    states, state_rows, rows, row_ptr, succ, lower, upper, u, maximize, minimizes, slack
+):
+    """One Gauss-Seidel pass over ``states`` (each with the rows
+    ``rows[state_rows[k]:state_rows[k + 1]]``): where the exact Bellman value may exceed
+    ``U(s)`` (any row when the controller maximises, its best row when it minimises),
+    ``U(s)`` is raised just above the bound (at most to 1, which every row respects).
+    Returns the number of states raised: a pass that raises none shows ``T(U) <= U``
+    exactly."""
+    width = 1
+    for r in range(rows.size):
+        width = max(width, row_ptr[rows[r] + 1] - row_ptr[rows[r]])
+    idx = np.empty(width, dtype=np.int64)
+    keys = np.empty(width)
+    work = np.empty(2 * width + 8)
+    raised = 0
+    for k in range(states.size):
+        s = states[k]
+        if u[s] >= 1.0:
+            continue
+        worst = -np.inf if maximize else np.inf
+        for j in range(state_rows[k], state_rows[k + 1]):
+            r = rows[j]
+            a, b = row_ptr[r], row_ptr[r + 1]
+            x = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, slack, idx, keys, work)
+            worst = max(worst, x) if maximize else min(worst, x)
+        if worst > 0.0:
+            raised += 1
+            u[s] = min(1.0, np.nextafter(u[s] + worst * (1.0 + 2.0**-40), np.inf))
+    return raised

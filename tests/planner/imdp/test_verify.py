@@ -1,0 +1,122 @@
+"""The exact superharmonicity check (planner.imdp.kernels.verify, certify.verify_upper)."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from planner.imdp.kernels.verify import row_excess
+
+
+def _exact_excess(succ, lo, up, u, us, minimizes):
+    """``T_r(U) - U(s)`` in rational arithmetic: the adversary's greedy vertex."""
+    order = sorted(range(len(succ)), key=lambda i: u[succ[i]], reverse=not minimizes)
+    p = [Fraction(x) for x in lo]
+    rem = 1 - sum(p)
+    for i in order:
+        give = min(Fraction(up[i]) - Fraction(lo[i]), rem)
+        p[i] += give
+        rem -= give
+    assert rem == 0
+    return sum(p[i] * Fraction(u[succ[i]]) for i in range(len(succ))) - Fraction(us)
+
+
+def _dyadic_row(rng, k, n):
+    """``k`` successors among ``n`` states, bounds multiples of 2^-40 around a
+    distribution that sums to exactly 1."""
+    q = 2**40
+    w = rng.dirichlet(np.ones(k))
+    c = np.floor(w * q).astype(np.int64)
+    c[0] += q - c.sum()
+    lo = np.floor(c * rng.uniform(0.0, 1.0, k)).astype(np.int64)
+    lo[rng.random(k) < 0.3] = 0
+    up = np.minimum(q, c + np.floor(rng.uniform(0.0, 0.3, k) * q).astype(np.int64))
+    succ = rng.choice(n, size=k, replace=False)
+    return succ, lo / q, up / q
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_row_excess_bounds_the_exact_excess_from_above(seed):
+    # values spread, nearly equal (differences of an ulp) and equal: the bound is never
+    # below the rational excess and above it by at most a few ulps of the differences
+    rng = np.random.default_rng(seed)
+    n = 12
+    idx, keys, work = np.empty(n, dtype=np.int64), np.empty(n), np.empty(2 * n + 8)
+    checked = 0
+    for trial in range(300):
+        kind = trial % 3
+        if kind == 0:
+            u = rng.uniform(0.0, 1.0, n)
+        elif kind == 1:
+            u = 0.9 + rng.integers(-3, 4, n) * np.finfo(float).eps
+        else:
+            u = np.full(n, 0.75)
+        k = int(rng.integers(1, 8))
+        succ, lo, up = _dyadic_row(rng, k, n)
+        s = int(rng.integers(n))
+        for minimizes in (True, False):
+            got = row_excess(0, k, succ, lo, up, u, u[s], minimizes, 0.0, idx, keys, work)
+            exact = _exact_excess(succ, lo, up, u, u[s], minimizes)
+            assert Fraction(got) >= exact
+            assert got - float(exact) <= 1e-14 * max(1.0, float(np.ptp(u)))
+            checked += 1
+            if kind == 2 and s in succ:
+                assert got == 0.0  # equal values: exact, nothing added
+    assert checked == 600
+
+
+def test_row_excess_refuses_a_vertex_it_cannot_show_feasible():
+    # the bounds bracket 1 only within 1e-12: the minimising adversary's vertex is shown
+    # only with that slack on its critical entry
+    succ = np.array([0, 1])
+    lo = np.array([0.5, 0.5 - 1e-12])
+    up = lo.copy()
+    u = np.array([0.25, 0.75])
+    idx, keys, work = np.empty(2, dtype=np.int64), np.empty(2), np.empty(12)
+    assert row_excess(0, 2, succ, lo, up, u, 0.6, True, 0.0, idx, keys, work) == np.inf
+    assert row_excess(0, 2, succ, lo, up, u, 0.6, True, 1e-9, idx, keys, work) < np.inf
+    # the maximising adversary's bound needs no vertex (weak duality)
+    assert row_excess(0, 2, succ, lo, up, u, 0.6, False, 0.0, idx, keys, work) < np.inf
+
+
+def test_a_slow_exit_is_not_certified_away():
+    # state 0: action 0 keeps 1 - 2^-47 and leaves with 7 * 2^-50 to the goal, 2^-50 to
+    # the trap (minimal probability 7/8); action 1 reaches the goal surely. Solved as the
+    # dual (maximal reachability of the trap), the checks' rounding allowance hid the
+    # trap's 2^-50 per step, and the widening's short-stay stand-in (action 1) hid the
+    # stay: [0.9999999975, 0.99999999999994] was certified. A bracket counts only once its
+    # bound from above is shown superharmonic in exact arithmetic.
+    from planner.imdp import IMDP, Problem, ReachAvoid, Specification, solve
+
+    q = 2.0**-50
+    goal, trap = 7 * q, q
+    s, act = [0, 0, 0, 0, 0, 1, 2], [0, 0, 0, 1, 1, 0, 0]
+    t, p = [0, 1, 2, 0, 1, 1, 2], [1 - goal - trap, goal, trap, 0.75, 0.25, 1.0, 1.0]
+    m = IMDP(3, s, act, t, p, p, labels=[(), ("goal",), ("bad",)], propositions=("bad", "goal"))
+    spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
+    sol = solve(Problem(m, spec))
+    exact = Fraction(goal) / (Fraction(goal) + Fraction(trap))
+    assert Fraction(sol.lower[0]) <= exact <= Fraction(sol.upper[0])
+    assert not sol.converged
+
+
+def test_verify_upper_shows_a_certified_bound_and_refuses_a_low_one():
+    from planner.imdp import Problem, ReachAvoid, Specification, solve
+    from planner.imdp.certify import verify_upper
+
+    from .reference import random_imdp
+
+    m = random_imdp(np.random.default_rng(3), n_states=15, zero_lower=True)
+    sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+    assert sol.converged
+    free_rows = np.flatnonzero(~sol.fixed[m.row_state])
+    shown, u = verify_upper(m, free_rows, sol.upper, True, True)
+    assert shown and np.all(u >= sol.upper) and np.max(u - sol.upper) < 1e-12
+    low = sol.upper.copy()
+    free = ~sol.fixed
+    low[free] = np.maximum(0.0, sol.lower[free] - 1e-3)
+    assert (sol.lower[free] > 1e-3).any()
+    shown, _ = verify_upper(m, free_rows, low, True, True, passes=2)
+    assert not shown
