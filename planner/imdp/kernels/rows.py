@@ -60,13 +60,10 @@ def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float
     return sign * (lv + rem * t - short) if holds else np.nan
 
 
-@numba.njit(cache=True, nogil=True)
-def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit, idx, keys):
-    """Row ``r``'s value by sorting it (an insertion sort into the scratch arrays
-    ``idx``/``keys``), its critical entry recorded in ``crit[r]`` for
-    :func:`threshold_value`."""
-    a = row_ptr[r]
-    n = row_ptr[r + 1] - a
+@numba.njit(cache=True, nogil=True, inline="always")
+def sort_entries(a: int, n: int, succ, v, sign: float, idx, keys) -> None:
+    """Insertion sort of the entries ``a:a + n`` by the key ``sign * v[succ]`` into the
+    scratch arrays: ``idx[:n]`` the entries, ``keys[:n]`` their keys, ascending (stable)."""
     for i in range(n):
         k = sign * v[succ[a + i]]
         j = i - 1
@@ -76,6 +73,16 @@ def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, c
             j -= 1
         keys[j + 1] = k
         idx[j + 1] = a + i
+
+
+@numba.njit(cache=True, nogil=True)
+def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit, idx, keys):
+    """Row ``r``'s value by sorting it (an insertion sort into the scratch arrays
+    ``idx``/``keys``), its critical entry recorded in ``crit[r]`` for
+    :func:`threshold_value`."""
+    a = row_ptr[r]
+    n = row_ptr[r + 1] - a
+    sort_entries(a, n, succ, v, sign, idx, keys)
     left = remaining[r]
     q = 0.0
     c = idx[n - 1]

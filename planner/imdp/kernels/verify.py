@@ -25,6 +25,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from planner.imdp.kernels.rows import sort_entries
+
 _UNIT = 2.0**-53
 """Unit roundoff of double precision."""
 
@@ -77,16 +79,7 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
     1), decided in exact arithmetic. ``idx``/``keys``: scratch as long as the row;
     ``work``: scratch of twice that length plus 8."""
     n = b - a
-    sign = 1.0 if minimizes else -1.0
-    for i in range(n):
-        k = sign * u[succ[a + i]]
-        j = i - 1
-        while j >= 0 and keys[j] > k:
-            keys[j + 1] = keys[j]
-            idx[j + 1] = idx[j]
-            j -= 1
-        keys[j + 1] = k
-        idx[j + 1] = a + i
+    sort_entries(a, n, succ, u, 1.0 if minimizes else -1.0, idx, keys)
     # the critical position: the adversary's remaining mass runs out there
     rem = 1.0
     for i in range(n):
