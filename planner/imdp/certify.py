@@ -86,9 +86,14 @@ def verify_upper(
     seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1])))
     state_rows = np.append(seg, rows.size).astype(np.int64)
     args = (rs[seg], state_rows, rows, m.row_ptr, m.successor, m.lower, m.upper, out)
+    due = np.zeros(m.n_states, dtype=bool)
+    due[rs[seg]] = True
+    inc_ptr, _, inc_state, _, _ = m.reverse_index()
     last, stalled = None, 0
     for _ in range(passes):
-        raised = raise_pass(*args, maximize, adversary_minimizes, float(m.tolerance))
+        raised = raise_pass(
+            *args, maximize, adversary_minimizes, float(m.tolerance), due, inc_ptr, inc_state
+        )
         if raised == 0:
             return True, out
         stalled = stalled + 1 if last is not None and raised >= last else 0

@@ -134,14 +134,31 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
 
 @numba.njit(cache=True, nogil=True)
 def raise_pass(
-    states, state_rows, rows, row_ptr, succ, lower, upper, u, maximize, minimizes, slack
+    states,
+    state_rows,
+    rows,
+    row_ptr,
+    succ,
+    lower,
+    upper,
+    u,
+    maximize,
+    minimizes,
+    slack,
+    due,
+    inc_ptr,
+    inc_state,
 ):
     """One Gauss-Seidel pass over ``states`` (each with the rows
     ``rows[state_rows[k]:state_rows[k + 1]]``): where the exact Bellman value may exceed
     ``U(s)`` (any row when the controller maximises, its best row when it minimises),
     ``U(s)`` is raised just above the bound (at most to 1, which every row respects).
-    Returns the number of states raised: a pass that raises none shows ``T(U) <= U``
-    exactly."""
+    Only the states flagged in ``due`` (per model state) are checked, which clears their
+    flag; a raised state flags its predecessors (``inc_ptr``/``inc_state``: the states
+    with a row that has it as a successor, from the model's reverse index). A state not
+    due passed its last check and none of its successors moved since, so it still passes.
+    Returns the number of states raised: once a pass raises none, ``T(U) <= U`` holds
+    exactly at every state of ``states``."""
     width = 1
     for r in range(rows.size):
         width = max(width, row_ptr[rows[r] + 1] - row_ptr[rows[r]])
@@ -151,6 +168,9 @@ def raise_pass(
     raised = 0
     for k in range(states.size):
         s = states[k]
+        if not due[s]:
+            continue
+        due[s] = False
         if u[s] >= 1.0:
             continue
         worst = -np.inf if maximize else np.inf
@@ -162,4 +182,6 @@ def raise_pass(
         if worst > 0.0:
             raised += 1
             u[s] = min(1.0, np.nextafter(u[s] + worst * (1.0 + 2.0**-40), np.inf))
+            for e in range(inc_ptr[s], inc_ptr[s + 1]):
+                due[inc_state[e]] = True
     return raised
