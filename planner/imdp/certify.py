@@ -6,7 +6,9 @@ superharmonic vector, ``T(U) <= U`` (targets at 1), is at least the least fixed 
 checking ``T(U) <= U`` once certifies ``U`` as an upper bound; no end-component analysis is
 needed for the check. :func:`planner.imdp.kernels.upper_sweep` does the check and lowers
 ``U`` at the same time (a Gauss-Seidel pass that never raises a value; a pass without a
-violation leaves a superharmonic vector).
+violation leaves a superharmonic vector, up to the floating-point allowance ``ROUNDING``
+per state). What counts as the certificate is :func:`verify_upper`: the same inequality
+shown in exact arithmetic.
 
 The candidate (:func:`optimistic_candidate`, optimistic value iteration, Hartmanns and
 Kaminski 2020) is ``min(1, L + delta)`` from the values ``L`` from below, lowered by a few

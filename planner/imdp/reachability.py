@@ -20,7 +20,8 @@ Maximal reachability against a minimising adversary first runs interval iteratio
 below changes no value by the current goal (``tolerance`` at first), the candidate
 ``U = min(1, L + tolerance / 2)`` is checked by passes of
 :func:`planner.imdp.kernels.upper_sweep` (optimistic value iteration, Hartmanns and
-Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` certifies ``U``.
+Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` (in floating point,
+up to ``ROUNDING``) accepts ``U``.
 Candidates fail where the values from below still move (a slow leak, or mass that
 circulates long among free states): then, for maximal reachability on at most
 ``_SI_MAX_STATES`` free states, strategy iteration makes the values exact (the least fixed
@@ -29,6 +30,10 @@ continue. After ``_OVI_TRIES`` failures the upper bound is iterated from the tri
 superharmonic ``U = 1`` instead, each pass again a sound upper bound (it may stall above the
 value inside end components that the opposing side can hold; the bracket then stays wide
 and ``converged`` is ``False``).
+
+**The certificate**: the accepted bound, raised by :func:`rounding_widened`, counts only once
+:func:`planner.imdp.certify.verify_upper` shows it superharmonic in exact arithmetic
+(``ReachResult.verified``); the floating-point checks above only steer.
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
 if few, are solved by strategy iteration with the others held; else, if the residuals
@@ -388,26 +393,29 @@ def rounding_widened(
     tolerance: float,
     sweeper: ReachSweeper,
 ) -> np.ndarray:
-    """``upper`` plus what floating point may have hidden from its certificate.
+    """``upper`` plus what floating point may have hidden from the floating-point checks:
+    the candidate that :func:`planner.imdp.certify.verify_upper` then checks in exact
+    arithmetic (which is the proof; this raise only lets it pass in fewer passes: on the
+    benchmark grid 3-4 instead of 7-10).
 
     The checks accept ``T(U) <= U + ROUNDING`` and every evaluation is rounded, so along a
     strategy ``sigma`` whose rows satisfy that (with the adversary ``P`` of ``U``), ``U``
     is only known to be at least ``V_sigma - A^-1 e`` (``e`` the allowance per step,
     :func:`planner.imdp.stay.chain_stay_allowance`; 0 where that chain never leaves the
-    free states, the strategy's value there being 0). ``V*`` is the value of an optimal
-    strategy, so ``U + A^-1 e`` of one bounds it:
+    free states, the strategy's value there being 0). ``U + A^-1 e`` of an optimal
+    strategy would bound ``V*``; the strategy taken stands in for one:
 
-    * minimising strategy: the strategy greedy for ``U`` is that witness;
-    * maximising strategy: an optimal strategy's rows are within ``U - L`` of the best at
-      ``U``; among those rows one of short stay is taken: the greedy surest exit
+    * minimising strategy: the strategy greedy for ``U`` (a true witness);
+    * maximising strategy: among the rows within ``U - L`` of the best at ``U`` (where an
+      optimal strategy's rows lie *if* ``U`` bounds ``V*``, which is what is to be shown:
+      no proof) one of short stay: the greedy surest exit
       (:func:`planner.imdp.stay.surest_exit_start`), shortened by policy iteration
       (:func:`planner.imdp.stay.shortest_stay`) up to ``_SI_MAX_STATES`` free
       states, beyond which no sparse LU runs, until the widening fits in the room left to
       ``tolerance`` (or a tenth of an open bracket;
-      :func:`planner.imdp.stay.widening_room`). It stands in for an optimal
-      strategy: exact where the optimal one is unique, and where the optimal strategies
-      all stay long (slow leaks: 1e-7 per step, 1e7 steps, up to 1e-8 hidden) it widens
-      the bracket as it must.
+      :func:`planner.imdp.stay.widening_room`). Where a slow exit hides below the
+      allowance the stand-in can miss it (an exact value of 7/8 was once certified as
+      ``[0.9999999975, 1)`` this way); the exact check does not.
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
 
