@@ -178,7 +178,8 @@ class DecoupledProduct:
             evaluations=full.evaluations,
             fixed=sol.fixed,
             lower=np.maximum(sol.lower, full.lower[:n]),
-            upper=np.minimum(sol.upper, full.upper[:n]),
+            # the direct bound is not shown: a certified expansion stands on its own
+            upper=full.upper[:n] if full.converged else np.minimum(sol.upper, full.upper[:n]),
             upper_sweeps=sol.upper_sweeps + full.upper_sweeps,
         )
 
