@@ -393,10 +393,9 @@ def rounding_widened(
     tolerance: float,
     sweeper: ReachSweeper,
 ) -> np.ndarray:
-    """``upper`` plus what floating point may have hidden from the floating-point checks:
-    the candidate that :func:`planner.imdp.certify.verify_upper` then checks in exact
-    arithmetic (which is the proof; this raise only lets it pass in fewer passes: on the
-    benchmark grid 3-4 instead of 7-10).
+    """``upper`` plus what rounding may have hidden from the floating-point checks: the
+    candidate that :func:`planner.imdp.certify.verify_upper` checks in exact arithmetic
+    (the proof; this raise lets it pass in 3-4 passes instead of 7-10).
 
     The checks accept ``T(U) <= U + ROUNDING`` and every evaluation is rounded, so along a
     strategy ``sigma`` whose rows satisfy that (with the adversary ``P`` of ``U``), ``U``
@@ -413,9 +412,8 @@ def rounding_widened(
       (:func:`planner.imdp.stay.shortest_stay`) up to ``_SI_MAX_STATES`` free
       states, beyond which no sparse LU runs, until the widening fits in the room left to
       ``tolerance`` (or a tenth of an open bracket;
-      :func:`planner.imdp.stay.widening_room`). Where a slow exit hides below the
-      allowance the stand-in can miss it (an exact value of 7/8 was once certified as
-      ``[0.9999999975, 1)`` this way); the exact check does not.
+      :func:`planner.imdp.stay.widening_room`). A slow exit below the allowance can
+      escape it (7/8 was once certified as ``[0.9999999975, 1)``); not the exact check.
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
 
