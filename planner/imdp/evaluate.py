@@ -353,4 +353,5 @@ def strategy_reach_value(
     x, err, defect = out
     if err is None or not sound:
         return x.copy()
-    return np.maximum(x - err.bound(defect), 0.0)
+    # rounded down: the subtraction itself must not round above the bound
+    return np.maximum(np.nextafter(x - err.bound(defect), -np.inf), 0.0)

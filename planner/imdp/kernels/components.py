@@ -310,9 +310,11 @@ def component_exit_bound(
     of ``v`` over its exit rows ``exit_rows[exit_ptr[c]:exit_ptr[c + 1]]`` (0 without
     exits), then ``v[s] = max(v[s], E_c)`` (``raise_values``) or ``min(v[s], E_c)`` for its
     members ``members[member_ptr[c]:member_ptr[c + 1]]``, in place (see
-    :mod:`planner.imdp.certify` for when each is sound)."""
+    :mod:`planner.imdp.certify` for when each is sound; raised values are lowered by the
+    rounding bound of :func:`planner.imdp.kernels.rows.below` first)."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
+    width = idx.size
     for c in comps:
         best = 0.0
         for k in range(exit_ptr[c], exit_ptr[c + 1]):
@@ -322,10 +324,11 @@ def component_exit_bound(
                 q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             if q > best:
                 best = q
+        low = best - (4 * width + 16) * 2.0**-53  # rows.below, for the longest exit
         for k in range(member_ptr[c], member_ptr[c + 1]):
             s = members[k]
             if raise_values:
-                if best > v[s]:
-                    v[s] = best
+                if low > v[s]:
+                    v[s] = low
             elif best < v[s]:
                 v[s] = best

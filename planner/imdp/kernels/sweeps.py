@@ -18,6 +18,7 @@ import scipy.sparse as sp
 
 from planner.imdp.kernels.rows import (
     all_row_values,
+    below,
     gather_rows,
     patch_rows,
     row_distributions,
@@ -54,7 +55,8 @@ def gauss_seidel_sweep(
     one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: for
     a maximising strategy its update is at most the full one). Iterating from below
     (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
-    sound lower bound.
+    sound lower bound; each update is lowered by its rounding bound
+    (:func:`planner.imdp.kernels.rows.below`) so that this holds in floating point too.
 
     ``bound`` (full sweeps of a maximising strategy; empty: none): per layout row a value
     at least the row's value at every ``V`` swept (the row cache of the passes from above,
@@ -110,6 +112,7 @@ def gauss_seidel_sweep(
         if full:
             best_row[k] = arg
         old = v[s]
+        best = below(best, arg, row_ptr)
         if best > old:
             v[s] = best
             if best - old > residual:
