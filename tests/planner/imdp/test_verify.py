@@ -120,3 +120,46 @@ def test_verify_upper_shows_a_certified_bound_and_refuses_a_low_one():
     assert (sol.lower[free] > 1e-3).any()
     shown, _ = verify_upper(m, free_rows, low, True, True, passes=2)
     assert not shown
+
+
+def _exact_chain_values(n, s, t, p, target):
+    """Reachability of ``target`` in a Markov chain with rational (dyadic) probabilities:
+    Gauss-Jordan elimination in fractions over the states ``0..n-1``."""
+    a = [[Fraction(int(i == j)) for j in range(n)] + [Fraction(0)] for i in range(n)]
+    for x, y, q in zip(s, t, p, strict=True):
+        if x < n:
+            if y == target:
+                a[x][n] += Fraction(q)
+            elif y < n:
+                a[x][y] -= Fraction(q)
+    for c in range(n):
+        piv = next(r for r in range(c, n) if a[r][c] != 0)
+        a[c], a[piv] = a[piv], a[c]
+        for r in range(n):
+            if r != c and a[r][c] != 0:
+                f = a[r][c] / a[c][c]
+                a[r] = [a[r][k] - f * a[c][k] for k in range(n + 1)]
+    return [a[i][n] / a[i][i] for i in range(n)]
+
+
+def test_lower_bounds_are_rounded_downwards():
+    # a chain with exits of 5e-15 .. 8e-12 per step and probabilities that are multiples of
+    # 2^-50 (exact values rational): with round-to-nearest sweeps the certified lower bound
+    # of state 0 sat one ulp (1.6e-27 at 1.27e-11) above its exact value
+    from planner.imdp import IMDP, Problem, ReachAvoid, Specification, solve
+
+    s = [0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 4, 5]
+    t = [0, 1, 3, 4, 5, 0, 1, 2, 4, 5, 2, 5, 0, 1, 2, 4, 5, 4, 5]
+    p = [
+        0.020158841072023925, 0.006143072676962902, 0.9736980862466265, 4.381384144380718e-12,
+        5.329070518200751e-15, 0.07506169968100451, 0.2943476644109264, 0.6305906359080371,
+        5.329070518200751e-15, 2.6645352591003757e-14, 0.9999999999999574,
+        4.263256414560601e-14, 0.02888897984132832, 0.2889102886097481, 0.6822007315411032,
+        7.546852032191964e-12, 2.7355895326763857e-13, 1.0, 1.0,
+    ]  # fmt: skip
+    labels = [()] * 4 + [("goal",), ("bad",)]
+    m = IMDP(6, s, [0] * len(s), t, p, p, labels=labels, propositions=("bad", "goal"))
+    exact = _exact_chain_values(4, s, t, p, 4)
+    sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+    for x in range(4):
+        assert Fraction(sol.lower[x]) <= exact[x] <= Fraction(sol.upper[x])
