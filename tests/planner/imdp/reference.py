@@ -3,6 +3,8 @@ check the vectorised planner, plus a random model generator."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
 from planner.imdp import IMDP
@@ -265,7 +267,6 @@ def exact_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, in
     a path to the target are 0. Adversary policy iteration:
     sort the successors by value, hand out the remaining mass in that order, solve the
     chain exactly (Gauss-Jordan over ``Fraction``), until the values repeat."""
-    from fractions import Fraction
 
     rows = rows_of(model)
     n = model.n_states
@@ -296,16 +297,10 @@ def exact_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, in
                     mat[i][idx[j]] -= p
                 else:
                     mat[i][k] += p * val[j]
-        for c in range(k):
-            piv = next(r for r in range(c, k) if mat[r][c] != 0)
-            mat[c], mat[piv] = mat[piv], mat[c]
-            for r in range(k):
-                if r != c and mat[r][c] != 0:
-                    f = mat[r][c] / mat[c][c]
-                    mat[r] = [a - f * b for a, b in zip(mat[r], mat[c], strict=True)]
+        x = solve_rational(mat)
         new = list(val)
         for q in free:
-            new[q] = mat[idx[q]][k] / mat[idx[q]][idx[q]]
+            new[q] = x[idx[q]]
         if new == val:
             return val
         val = new
@@ -320,3 +315,17 @@ def exact_reach_by_strategies(model: IMDP, target: np.ndarray) -> np.ndarray:
         v = exact_strategy_value(model, target, strategy)
         best = v if best is None else [max(a, b) for a, b in zip(best, v, strict=True)]
     return np.array([float(x) for x in best])
+
+
+def solve_rational(mat: list[list[Fraction]]) -> list[Fraction]:
+    """The solution of the ``k x (k + 1)`` augmented system ``mat`` (non-singular) by
+    Gauss-Jordan elimination in rational arithmetic (``mat`` is overwritten)."""
+    k = len(mat)
+    for c in range(k):
+        piv = next(r for r in range(c, k) if mat[r][c] != 0)
+        mat[c], mat[piv] = mat[piv], mat[c]
+        for r in range(k):
+            if r != c and mat[r][c] != 0:
+                f = mat[r][c] / mat[c][c]
+                mat[r] = [a - f * b for a, b in zip(mat[r], mat[c], strict=True)]
+    return [mat[i][k] / mat[i][i] for i in range(k)]

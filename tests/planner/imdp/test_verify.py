@@ -123,8 +123,10 @@ def test_verify_upper_shows_a_certified_bound_and_refuses_a_low_one():
 
 
 def _exact_chain_values(n, s, t, p, target):
-    """Reachability of ``target`` in a Markov chain with rational (dyadic) probabilities:
-    Gauss-Jordan elimination in fractions over the states ``0..n-1``."""
+    """Reachability of ``target`` in a Markov chain with rational (dyadic) probabilities
+    over the states ``0..n-1``."""
+    from .reference import solve_rational
+
     a = [[Fraction(int(i == j)) for j in range(n)] + [Fraction(0)] for i in range(n)]
     for x, y, q in zip(s, t, p, strict=True):
         if x < n:
@@ -132,14 +134,7 @@ def _exact_chain_values(n, s, t, p, target):
                 a[x][n] += Fraction(q)
             elif y < n:
                 a[x][y] -= Fraction(q)
-    for c in range(n):
-        piv = next(r for r in range(c, n) if a[r][c] != 0)
-        a[c], a[piv] = a[piv], a[c]
-        for r in range(n):
-            if r != c and a[r][c] != 0:
-                f = a[r][c] / a[c][c]
-                a[r] = [a[r][k] - f * a[c][k] for k in range(n + 1)]
-    return [a[i][n] / a[i][i] for i in range(n)]
+    return solve_rational(a)
 
 
 def test_lower_bounds_are_rounded_downwards():
