@@ -30,7 +30,7 @@ from scipy.sparse.csgraph import connected_components
 from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
 from planner.imdp.kernels.verify import raise_pass
-from planner.imdp.model import IMDP, row_entries
+from planner.imdp.model import IMDP, first_of_runs, row_entries
 from planner.modes import Adversary
 
 OVI_PASSES = 8
@@ -44,10 +44,17 @@ def check_upper(
     Stops early once the number of violations no longer decreases over two passes.
     ``raise_violations``: a violating state takes its Bellman value (a repair of the
     candidate; only a later pass without violations certifies it)."""
+    return _until_clean(lambda: sweeper.upper_pass(u, raise_violations)[1], passes)
+
+
+def _until_clean(one_pass, passes: int) -> tuple[bool, int]:
+    """Up to ``passes`` calls of ``one_pass`` (a pass returning its count of violations)
+    until one finds none: ``(found none, passes made)``; gives up once the count has not
+    fallen over two passes."""
     last = None
     stalled = 0
     for k in range(1, passes + 1):
-        _, bad = sweeper.upper_pass(u, raise_violations)
+        bad = one_pass()
         if bad == 0:
             return True, k
         stalled = stalled + 1 if last is not None and bad >= last else 0
@@ -85,24 +92,19 @@ def verify_upper(
     if rows.size == 0:
         return True, out
     rs = m.row_state[rows]
-    seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1])))
+    seg = first_of_runs(rs)
     state_rows = np.append(seg, rows.size).astype(np.int64)
     args = (rs[seg], state_rows, rows, m.row_ptr, m.successor, m.lower, m.upper, out)
     due = np.zeros(m.n_states, dtype=bool)
     due[rs[seg]] = True
     inc_ptr, _, inc_state, _, _ = m.reverse_index()
-    last, stalled = None, 0
-    for _ in range(passes):
-        raised = raise_pass(
-            *args, maximize, adversary_minimizes, float(m.tolerance), due, inc_ptr, inc_state
-        )
-        if raised == 0:
-            return True, out
-        stalled = stalled + 1 if last is not None and raised >= last else 0
-        if stalled >= 2:
-            break
-        last = raised
-    return False, out
+    tol = float(m.tolerance)
+
+    def one_pass() -> int:
+        return raise_pass(*args, maximize, adversary_minimizes, tol, due, inc_ptr, inc_state)
+
+    shown, _ = _until_clean(one_pass, passes)
+    return shown, out
 
 
 def optimistic_candidate(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import scratch, sorted_value, threshold_value
+from planner.imdp.kernels.rows import rounding_bound, scratch, sorted_value, threshold_value
 
 
 @numba.njit(cache=True, nogil=True)
@@ -324,7 +324,7 @@ def component_exit_bound(
                 q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             if q > best:
                 best = q
-        low = best - (4 * width + 16) * 2.0**-53  # rows.below, for the longest exit
+        low = best - rounding_bound(width)  # rows.below, for the longest row
         for k in range(member_ptr[c], member_ptr[c + 1]):
             s = members[k]
             if raise_values:

@@ -61,6 +61,12 @@ def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def rounding_bound(k: int) -> float:
+    """The rounding bound of :func:`below` for a row of ``k`` entries."""
+    return (4 * k + 16) * 2.0**-53
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def below(q: float, r: int, row_ptr) -> float:
     """``q``, a row value from :func:`threshold_value` or :func:`sorted_value` of values
     in ``[0, 1]``, lowered by a bound of its rounding, ``(4k + 16)`` units of roundoff for
@@ -69,8 +75,7 @@ def below(q: float, r: int, row_ptr) -> float:
     from below with it stays a sound lower bound however long mass circulates. The loss
     adds up only along the chosen rows: about 1e-14 per step of an optimal strategy's
     expected stay."""
-    k = row_ptr[r + 1] - row_ptr[r]
-    return q - (4 * k + 16) * 2.0**-53
+    return q - rounding_bound(row_ptr[r + 1] - row_ptr[r])
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

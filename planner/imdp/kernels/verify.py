@@ -14,7 +14,8 @@ form whose rounding scales with the value *differences* (not with the values, as
   lambda) + sum_{U_j < lambda} l_j (U_j - lambda)`` bounds the maximum from above (weak
   duality), ``lambda`` the critical successor's value (where it is exact).
 
-Each difference is split exactly into its rounded value and its error (TwoSum), and the
+Each difference is split exactly into its rounded value and its error (TwoSum of
+:mod:`planner.imdp.kernels.exact`), and the
 sum is taken up by ``(2n + 6)`` units of roundoff of the summed magnitudes, so the result
 is at least the exact excess. Where the values of a pocket are equal the excess is exactly
 0 and nothing is added: no allowance per step accumulates over long stays.
@@ -25,18 +26,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import sort_entries
+from planner.imdp.kernels.exact import _two_sum
+from planner.imdp.kernels.rows import scratch, sort_entries
 
 _UNIT = 2.0**-53
 """Unit roundoff of double precision."""
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _two_diff(a: float, b: float) -> tuple[float, float]:
-    """``a - b`` as a rounded value and its exact error."""
-    s = a - b
-    bb = s - a
-    return s, (a - (s - bb)) - (b + bb)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -46,10 +40,7 @@ def _grow(e, m: int, b: float) -> int:
     q = b
     k = 0
     for i in range(m):
-        s = q + e[i]
-        bb = s - q
-        h = (q - (s - bb)) + (e[i] - bb)
-        q = s
+        q, h = _two_sum(q, e[i])
         if h != 0.0:
             e[k] = h
             k += 1
@@ -115,7 +106,7 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
         terms[m + 2] = upper[ec]
         if not _at_least(terms, m + 3, e):
             return np.inf
-    total, tail = _two_diff(uc, us)
+    total, tail = _two_sum(uc, -us)
     bound = abs(tail)
     size = abs(total)
     for i in range(n):
@@ -124,7 +115,7 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
         e = idx[i]
         # before the critical position: upper bounds (either adversary's greedy order)
         p = upper[e] if i < c else lower[e]
-        d, de = _two_diff(u[succ[e]], uc)
+        d, de = _two_sum(u[succ[e]], -uc)
         t = p * d
         total += t
         size += abs(t)
@@ -159,12 +150,8 @@ def raise_pass(
     due passed its last check and none of its successors moved since, so it still passes.
     Returns the number of states raised: once a pass raises none, ``T(U) <= U`` holds
     exactly at every state of ``states``."""
-    width = 1
-    for r in range(rows.size):
-        width = max(width, row_ptr[rows[r] + 1] - row_ptr[rows[r]])
-    idx = np.empty(width, dtype=np.int64)
-    keys = np.empty(width)
-    work = np.empty(2 * width + 8)
+    idx, keys = scratch(row_ptr)
+    work = np.empty(2 * idx.size + 8)
     raised = 0
     for k in range(states.size):
         s = states[k]
