@@ -79,9 +79,8 @@ def verify_upper(
     """``(shown, U')``: ``U' >= u`` with ``T(U') <= U'`` shown in exact arithmetic on the
     states of ``free_rows`` (every other state's value is exact), so ``U' >= V*``
     (Knaster-Tarski) whatever floating point did before, for the interval polytopes of
-    the rows with the model's ``tolerance`` on the critical entry of a minimising
-    adversary (the slack with which the model accepted rows that bracket 1); ``shown``
-    is ``False`` when
+    the rows (which the model's constructor made bracket 1 exactly); ``shown`` is
+    ``False`` when
     ``passes`` passes of :func:`planner.imdp.kernels.verify.raise_pass` (each raising
     the states where a row may exceed ``U``) left violations, or when their number
     stopped falling over two passes (mass that circulates among states of nearly equal
@@ -98,10 +97,9 @@ def verify_upper(
     due = np.zeros(m.n_states, dtype=bool)
     due[rs[seg]] = True
     inc_ptr, _, inc_state, _, _ = m.reverse_index()
-    tol = float(m.tolerance)
 
     def one_pass() -> int:
-        return raise_pass(*args, maximize, adversary_minimizes, tol, due, inc_ptr, inc_state)
+        return raise_pass(*args, maximize, adversary_minimizes, 0.0, due, inc_ptr, inc_state)
 
     shown, _ = _until_clean(one_pass, passes)
     return shown, out

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from planner.imdp.kernels.exact import sum_below, sum_sign
+
 
 @numba.njit(cache=True, nogil=True)
 def check_entries(s, a, t, lo, up, n, n_act):
@@ -136,3 +138,141 @@ def entry_rows(row_ptr):
         for e in range(row_ptr[r], row_ptr[r + 1]):
             out[e] = r
     return out
+
+
+_UNIT = 2.0**-53
+"""Unit roundoff of double precision."""
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_to_tighten(row_ptr, lo, up, sum_lo, sum_up):
+    """The rows that :func:`tighten_rows` may change: those whose float sums cannot show
+    that they bracket 1, that no entry with ``lower == 0`` is forced and that every such
+    entry has room (the rest provably need nothing)."""
+    n_rows = row_ptr.size - 1
+    out = np.empty(n_rows, dtype=np.int64)
+    k = 0
+    for r in range(n_rows):
+        a, b = row_ptr[r], row_ptr[r + 1]
+        s_lo, s_up = sum_lo[r], sum_up[r]
+        # a bound of the rounding of these sums and of ``1 - (s - x_j)``
+        err_up = (b - a + 2) * _UNIT * (s_up + 1.0)
+        err_lo = (b - a + 2) * _UNIT * (s_lo + 1.0)
+        top = 0.0  # the largest upper bound of an entry with lower bound 0
+        for i in range(a, b):
+            if lo[i] == 0.0 and up[i] > top:
+                top = up[i]
+        if not (s_up - 1.0 > err_up and 1.0 - s_lo > err_lo and top < s_up - 1.0 - err_up):
+            out[k] = r
+            k += 1
+    return out[:k].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def tighten_rows(rows, row_ptr, lo, up, sum_lo, sum_up):
+    """Make the bounds of ``rows`` exact where the graph analyses read them, in place
+    (and their sums ``sum_lo``, ``sum_up``); returns the number of entries changed.
+
+    1. A row that brackets 1 only within the model's tolerance is made to bracket it
+       exactly (its polytope ``{l <= p <= u, sum p = 1}`` would be empty): the largest upper
+       bound is raised by the missing mass (or the largest lower bound lowered by the
+       excess), rounded outwards. Point intervals written in floating point (a sum of
+       ``1 - 2**-53``) get an interval that wide on one entry.
+    2. An entry with ``lower == 0`` is still forced when the other upper bounds sum to
+       less than 1 (every distribution puts at least ``1 - sum_{i != j} u_i`` on it): its
+       lower bound becomes that mass rounded down (the polytope is unchanged), at least
+       the least positive double. An entry with ``upper > 0`` that the other lower bounds
+       leave no room for (they sum to 1 or more) gets ``upper = 0``.
+
+    Each is decided in exact arithmetic (error-free expansions), so that ``lower > 0``
+    (must) and ``upper > 0`` (may) are exact per entry and the sums of a row's bounds are
+    exactly on their side of 1."""
+    longest = 1
+    for r in rows:
+        longest = max(longest, row_ptr[r + 1] - row_ptr[r])
+    terms = np.empty(longest + 1)
+    e = np.empty(longest + 1)
+    changed = 0
+    for r in rows:
+        a, b = row_ptr[r], row_ptr[r + 1]
+        if not (_brackets(up, a, b, terms, e, 1) and _brackets(lo, a, b, terms, e, -1)):
+            changed += _bracket_exactly(lo, up, a, b, terms, e)
+        for j in range(a, b):
+            if lo[j] != 0.0 or up[j] == 0.0:
+                continue
+            k = _others(terms, up, a, b, j)
+            if sum_sign(terms, k, e) > 0:
+                lo[j] = min(max(sum_below(terms, k, e), 5e-324), up[j])
+                changed += 1
+                continue
+            k = _others(terms, lo, a, b, j)
+            if sum_sign(terms, k, e) <= 0:
+                up[j] = 0.0
+                changed += 1
+        sum_lo[r], sum_up[r] = 0.0, 0.0
+        for i in range(a, b):
+            sum_lo[r] += lo[i]
+            sum_up[r] += up[i]
+    return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def fresh_copy(x):
+    """A copy of ``x`` from numba's allocator (see the module docstring)."""
+    out = np.empty_like(x)
+    for i in range(x.size):
+        out[i] = x[i]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _brackets(x, a, b, terms, e, side) -> bool:
+    """Whether ``sum x[a:b]`` is exactly at least 1 (``side = 1``) or at most 1 (-1)."""
+    s = 0.0
+    for i in range(a, b):
+        s += x[i]
+    err = (b - a + 2) * _UNIT * (s + 1.0)
+    if side * (s - 1.0) > err:
+        return True
+    terms[0] = -1.0
+    for i in range(a, b):
+        terms[1 + i - a] = x[i]
+    return side * sum_sign(terms, b - a + 1, e) >= 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _bracket_exactly(lo, up, a, b, terms, e) -> int:
+    """Raise the largest upper bound of the row ``a:b`` until the upper bounds sum to at
+    least 1, lower the largest lower bound until the lower bounds sum to at most 1 (both
+    exactly); the entries changed."""
+    changed = 0
+    while not _brackets(up, a, b, terms, e, 1):
+        j = a + np.argmax(up[a:b])
+        terms[0] = 1.0
+        for i in range(a, b):
+            terms[1 + i - a] = -up[i]
+        # at least the missing mass 1 - sum u, and one step more for the rounding
+        missing = -sum_below(-terms[: b - a + 1], b - a + 1, e)
+        up[j] = min(np.nextafter(up[j] + missing, np.inf), 1.0)
+        changed += 1
+    while not _brackets(lo, a, b, terms, e, -1):
+        j = a + np.argmax(lo[a:b])
+        terms[0] = -1.0
+        for i in range(a, b):
+            terms[1 + i - a] = lo[i]
+        excess = -sum_below(-terms[: b - a + 1], b - a + 1, e)
+        lo[j] = max(np.nextafter(lo[j] - excess, -np.inf), 0.0)
+        changed += 1
+    return changed
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _others(terms, x, a, b, j):
+    """``terms[:k] = 1, -x_i (i != j)`` over the row ``a:b``; returns ``k``."""
+    terms[0] = 1.0
+    k = 1
+    for i in range(a, b):
+        if i != j:
+            terms[k] = -x[i]
+            k += 1
+    return k

@@ -7,8 +7,10 @@ comparing computed probabilities with 0 or 1:
   might take it);
 * ``lower > 0``: the adversary *must* use the edge;
 * the interval constraint of a row: every adversary puts mass at least
-  ``max(sum_{j in X} l_j, 1 - sum_{j not in X} u_j)`` into a successor set ``X``; the second
-  term counts as positive when it exceeds the model's bound tolerance (1e-9 by default).
+  ``max(sum_{j in X} l_j, 1 - sum_{j not in X} u_j)`` into a successor set ``X``; whether
+  the second term is positive is decided exactly (the model's constructor has already
+  made every single entry's ``lower > 0`` and ``upper > 0`` exact, and made every row
+  bracket 1 exactly).
 
 Row masks ``rows`` (shape ``(n_rows,)``) restrict the actions a controller may use (a
 sub-model); state masks have shape ``(n_states,)``.
@@ -16,6 +18,7 @@ sub-model); state masks have shape ``(n_states,)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,26 +118,39 @@ def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
 def forced_into(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """Rows that put positive mass into ``mask`` under *every* adversary.
 
-    True iff some ``lower > 0`` edge enters ``mask``, or the upper bounds of the edges
-    outside ``mask`` sum to less than ``1 - tol``.
+    True iff some ``lower > 0`` edge enters ``mask``, or an ``upper > 0`` edge enters it
+    and the upper bounds of the edges outside ``mask`` sum to less than 1 (exactly).
     """
     inside = mask[model.successor]
     must = _row_any(model, (model.lower > 0) & inside)
-    outside_up = _row_sum(model, np.where(inside, 0.0, model.upper))
+    outside = np.where(inside, 0.0, model.upper)
     touches = _row_any(model, inside & (model.upper > 0))
-    return must | (touches & (outside_up < 1.0 - model.tolerance))
+    return must | (touches & (_sum_sign(model, outside) < 0))
 
 
 def may_stay_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """Rows for which *some* adversary keeps all mass in ``mask``.
 
-    No ``lower > 0`` edge leaves ``mask`` and the upper bounds inside sum to at least
-    ``1 - tol``.
+    No ``lower > 0`` edge leaves ``mask`` and the upper bounds inside sum to at least 1
+    (exactly).
     """
     inside = mask[model.successor]
     must_leave = _row_any(model, (model.lower > 0) & ~inside)
-    inside_up = _row_sum(model, np.where(inside, model.upper, 0.0))
-    return ~must_leave & (inside_up >= 1.0 - model.tolerance)
+    return ~must_leave & (_sum_sign(model, np.where(inside, model.upper, 0.0)) >= 0)
+
+
+def _sum_sign(model: IMDP, entry_values: np.ndarray) -> np.ndarray:
+    """Per row, the sign of the exact ``sum - 1`` of ``entry_values`` (values in
+    ``[0, 1]``): the float sum decides where rounding cannot tip it, ``math.fsum`` (exactly
+    rounded) the rest."""
+    total = _row_sum(model, entry_values)
+    sign = np.sign(total - 1.0)
+    k = np.diff(model.row_ptr)
+    near = np.flatnonzero(np.abs(total - 1.0) <= (2 * k + 2) * k * 2.0**-53)
+    for r in near:
+        part = entry_values[model.row_ptr[r] : model.row_ptr[r + 1]]
+        sign[r] = np.sign(math.fsum([*part.tolist(), -1.0]))
+    return sign
 
 
 def state_graph(model: IMDP, rows: np.ndarray | None = None) -> sp.csr_matrix:
@@ -224,7 +240,6 @@ def _attractor(
         np.asarray(start, dtype=bool),
         np.asarray(cand_rows, dtype=bool),
         *attractor_arrays(model),
-        1.0 - model.tolerance,
         False,
         True,
     )
@@ -324,7 +339,6 @@ def end_component_labels(
         r,
         s,
         mode == Adversary.OPTIMISTIC,
-        1.0 - model.tolerance,
     )
 
 

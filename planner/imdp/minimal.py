@@ -48,16 +48,14 @@ def unavoidable_reach(
     adversary (every ``upper > 0`` successor inside) or, cooperative, under some adversary
     (no ``lower > 0`` edge out, the upper bounds inside summing to at least 1; computed
     as the states joining when *every* row leaks: :func:`planner.imdp.kernels.attractor`
-    with ``every_row``). Rows whose bounds bracket 1 only within the model's tolerance
-    count as leaking: the set of value-0 states found is never larger than the true one,
-    so that settling it at 0 keeps an upper bound sound. ``avoid`` states and states
-    without rows never join (a run there never reaches ``target``).
+    with ``every_row``; the sums are compared with 1 exactly, so the set of value-0
+    states found is the true one and settling it at 0 keeps an upper bound sound).
+    ``avoid`` states and states without rows never join (a run there never reaches
+    ``target``).
     """
     m = model
     target, cand = graph.reach_rows(m, target, avoid, rows)
-    mask, _, led = attractor(
-        target.copy(), cand, *graph.attractor_arrays(m), 1.0, True, cooperative
-    )
+    mask, _, led = attractor(target.copy(), cand, *graph.attractor_arrays(m), True, cooperative)
     staying = np.flatnonzero(cand & ~led & ~mask[m.row_state])
     row = np.full(m.n_states, -1, dtype=np.int64)
     # rows are sorted by state: the first staying row of each state

@@ -12,10 +12,17 @@ Storage (CSR-like, rows sorted by state then action, entries by successor):
 * ``row_ptr[r] : row_ptr[r + 1]`` are the entries of row ``r`` in ``successor``,
   ``lower``, ``upper`` (and ``entry_row`` gives each entry's row).
 
-Bounds are stored as given. Graph analyses use the exact boolean structure
-``lower > 0`` / ``upper > 0``; an entry with ``upper == 0`` is allowed and means "never".
 A row must bracket 1: ``sum(lower) <= 1 + tol`` and ``sum(upper) >= 1 - tol`` with
-``tol = BOUND_TOLERANCE`` (1e-9) unless the caller states another tolerance.
+``tol = BOUND_TOLERANCE`` (1e-9) unless the caller states another tolerance. The
+constructor then makes the bounds exact where the analyses read them
+(:func:`planner.imdp.entries.tighten_rows`, in exact arithmetic): a row that brackets 1
+only within ``tol`` is widened by the missing mass on its largest bound so that it brackets
+1 exactly (its polytope ``{l <= p <= u, sum p = 1}`` would be empty); an entry with
+``lower == 0`` that the other upper bounds force (they sum to less than 1) gets that mass
+as its lower bound, rounded down; an entry with ``upper > 0`` that the other lower bounds
+leave no room for gets ``upper = 0``. The polytopes are unchanged, and graph analyses use
+the exact boolean structure ``lower > 0`` (must) / ``upper > 0`` (may); an entry with
+``upper == 0`` is allowed and means "never". Every other bound is stored as given.
 """
 
 from __future__ import annotations
@@ -33,7 +40,15 @@ from planner.errors import (
     RowSumError,
     UnknownLabelError,
 )
-from planner.imdp.entries import check_entries, entry_rows, row_layout, sorted_entries
+from planner.imdp.entries import (
+    check_entries,
+    entry_rows,
+    fresh_copy,
+    row_layout,
+    rows_to_tighten,
+    sorted_entries,
+    tighten_rows,
+)
 
 
 def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
@@ -145,6 +160,11 @@ class IMDP:
                 f"(sum of lower bounds {sum_lo[r]:.12g}, sum of upper bounds "
                 f"{sum_up[r]:.12g}, tolerance {tolerance:g})"
             )
+        loose = rows_to_tighten(row_ptr, lo, up, sum_lo, sum_up)
+        if loose.size:
+            if not perm.size:  # the caller's arrays: change copies
+                lo, up = fresh_copy(lo), fresh_copy(up)
+            tighten_rows(loose, row_ptr, lo, up, sum_lo, sum_up)
         rows_per_state = np.bincount(row_state, minlength=n)
         empty = np.flatnonzero(rows_per_state == 0)
         if empty.size:

@@ -78,7 +78,7 @@ class _Game:
     A sub-game keeps a set of states, the rows available there and the entries allowed
     in those rows; the invariant is that every available row's polytope restricted to its
     allowed entries is non-empty (the ``lower > 0`` entries are allowed and the allowed
-    upper bounds sum to at least ``1 - tol``), so every run stays in the region.
+    upper bounds sum to at least 1, exactly), so every run stays in the region.
     """
 
     def __init__(self, model: IMDP, good: np.ndarray, bad: np.ndarray) -> None:
@@ -88,7 +88,6 @@ class _Game:
         # the model's reverse index (and, on demand, the entries' order in it)
         self.inc_ptr, self.inc_row, self.inc_state, _, _ = model.reverse_index()
         self._order: np.ndarray | None = None
-        self.limit = 1.0 - model.tolerance
 
     # -- colours
     def accepting(self, region: np.ndarray, won: np.ndarray) -> bool:
@@ -143,7 +142,6 @@ class _Game:
             self.inc_state,
             inc_lo,
             inc_up,
-            self.limit,
             False,
             True,
         )

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from planner.imdp.kernels.exact import near_one, sum_sign
 from planner.imdp.kernels.rows import rounding_bound, scratch, sorted_value, threshold_value
 
 
@@ -74,7 +75,7 @@ def _tarjan(n, active, adj_ptr, adj):
 
 
 @numba.njit(cache=True, nogil=True)
-def _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic, limit):
+def _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic):
     """Whether row ``r`` stays in component ``c`` (see
     :func:`maximal_end_components_kernel`)."""
     inside = 0.0
@@ -88,7 +89,20 @@ def _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic, 
                 return False
         elif upper[e] > 0.0 and not same:
             return False
-    return inside >= limit if optimistic else True
+    if not optimistic:
+        return True
+    k = row_ptr[r + 1] - row_ptr[r]
+    if not near_one(inside, k):
+        return inside >= 1.0
+    terms = np.empty(k + 1)
+    terms[0] = -1.0
+    n = 1
+    for e in range(row_ptr[r], row_ptr[r + 1]):
+        t = successor[e]
+        if alive[t] and comp[t] == c:
+            terms[n] = upper[e]
+            n += 1
+    return sum_sign(terms, n, np.empty(k + 1)) >= 0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -104,13 +118,12 @@ def maximal_end_components_kernel(
     rows_ok,
     states_ok,
     optimistic,
-    limit,
 ):
     """Maximal end components by iterated SCC decomposition (compiled).
 
     A row stays in the component of its state when (``optimistic=False``) every
     ``upper > 0`` successor lies in that component, or (``optimistic``) no ``lower > 0``
-    successor leaves it and its ``upper`` bounds inside sum to at least ``limit``. Edges of
+    successor leaves it and its ``upper`` bounds inside sum to at least 1 (exactly). Edges of
     the graph: the ``upper > 0`` entries of the rows kept, into live states. Components
     are refined one at a time (a work list): drop the rows that leave the component and,
     in a cascade through the incoming entries, the states left without rows and the rows
@@ -188,7 +201,7 @@ def maximal_end_components_kernel(
             s = members[i]
             for r in range(st_ptr[s], st_ptr[s + 1]):
                 if rows[r] and not _row_stays(
-                    r, c, comp, alive, row_ptr, successor, lower, upper, optimistic, limit
+                    r, c, comp, alive, row_ptr, successor, lower, upper, optimistic
                 ):
                     rows[r] = False
                     dropped = True
@@ -209,9 +222,7 @@ def maximal_end_components_kernel(
                 s = row_state[r]
                 if not alive[s] or comp[s] != c:
                     continue
-                if not _row_stays(
-                    r, c, comp, alive, row_ptr, successor, lower, upper, optimistic, limit
-                ):
+                if not _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic):
                     rows[r] = False
                     n_live[s] -= 1
                     if n_live[s] == 0:

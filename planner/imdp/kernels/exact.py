@@ -38,6 +38,65 @@ def _two_prod(a: float, b: float) -> tuple[float, float]:
     return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _grow(e, m: int, b: float) -> int:
+    """Add ``b`` to the expansion ``e[:m]`` (non-overlapping components, smallest first)
+    without error (Shewchuk's grow-expansion, zero components dropped); its new length."""
+    q = b
+    k = 0
+    for i in range(m):
+        q, h = _two_sum(q, e[i])
+        if h != 0.0:
+            e[k] = h
+            k += 1
+    e[k] = q
+    return k + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def sum_sign(terms, n: int, e) -> int:
+    """The sign (-1, 0 or 1) of the exact sum of ``terms[:n]`` (``e``: scratch of length
+    ``n`` at least)."""
+    m = 0
+    for i in range(n):
+        m = _grow(e, m, terms[i])
+    for i in range(m - 1, -1, -1):
+        if e[i] != 0.0:
+            return 1 if e[i] > 0.0 else -1
+    return 0
+
+
+@numba.njit(cache=True, nogil=True)
+def sum_below(terms, n: int, e) -> float:
+    """A double at most the exact sum of ``terms[:n]``, within a few units of roundoff of
+    it (``e``: scratch of length ``n`` at least)."""
+    m = 0
+    for i in range(n):
+        m = _grow(e, m, terms[i])
+    total = 0.0
+    for i in range(m):
+        total += e[i]
+    # summing a non-overlapping expansion from its smallest component errs by less than
+    # an ulp of the result per component; step down past that
+    for _ in range(m + 1):
+        total = np.nextafter(total, -np.inf)
+    return total
+
+
+@numba.njit(cache=True, nogil=True)
+def _at_least(terms, n: int, e) -> bool:
+    """Whether the exact sum of ``terms[:n]`` is at least 0."""
+    return sum_sign(terms, n, e) >= 0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def near_one(approx: float, k: int) -> bool:
+    """Whether a float sum ``approx`` of at most ``2k`` additions and subtractions of
+    values in ``[0, 1]`` (partial sums at most ``k``) may lie on the other side of 1 than
+    the exact sum: then only exact arithmetic decides."""
+    return abs(approx - 1.0) <= (2 * k + 2) * k * 2.0**-53
+
+
 @numba.njit(cache=True, nogil=True)
 def chain_residual(indptr, indices, data, y, own) -> np.ndarray:
     """``r_i = sum_k data[k] * y[indices[k]] - y[own[i]]`` over the CSR rows ``i``,

@@ -8,6 +8,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from planner.imdp.kernels.exact import near_one, sum_sign
+
 
 @numba.njit(cache=True, nogil=True)
 def attractor(
@@ -23,7 +25,6 @@ def attractor(
     inc_state,
     inc_lower,
     inc_upper,
-    limit,
     every_row,
     forced,
 ):
@@ -31,11 +32,12 @@ def attractor(
 
     A candidate row *leads into* the set when it puts positive mass into it under every
     adversary (``forced``: an entry with ``lower > 0`` into the set, or an ``upper > 0``
-    entry into it while the upper bounds of the entries outside sum to less than
-    ``limit``, ``1 - tolerance``), or under some adversary (an ``upper > 0`` entry into
-    it). A state joins when one of its candidate rows leads into the set (a controller
-    that wants to get there) or, with ``every_row``, when all of them do (one that wants
-    to stay away; states without candidate rows then never join). Each state that joins
+    entry into it while the upper bounds of the entries outside sum to less than 1,
+    decided exactly where rounding could tip it), or under some adversary (an
+    ``upper > 0`` entry into it). A state joins when one of its candidate rows leads
+    into the set (a controller that wants to get there) or, with ``every_row``, when all
+    of them do (one that wants to stay away; states without candidate rows then never
+    join). Each state that joins
     updates only the rows with an entry into it, so the whole attractor costs ``O(entries
     of the candidate rows + their incoming lists)``; an incoming entry of a row whose state
     (``inc_state``, read in order) has joined is skipped without looking at the row.
@@ -53,6 +55,11 @@ def attractor(
     touches = np.zeros(n_rows, dtype=np.bool_)
     outside_up = np.zeros(n_rows)
     queue = np.empty(x.size, dtype=np.int64)
+    longest = 1
+    for r in range(n_rows):
+        longest = max(longest, row_ptr[r + 1] - row_ptr[r])
+    terms = np.empty(longest + 1)
+    scratch = np.empty(longest + 1)
     tail = 0
     for r in range(n_rows):
         if not cand[r]:
@@ -69,7 +76,18 @@ def attractor(
                 outside_up[r] += upper[e]
     for r in range(n_rows):
         s = row_state[r]
-        if cand[r] and not x[s] and touches[r] and (not forced or must[r] or outside_up[r] < limit):
+        if (
+            cand[r]
+            and not x[s]
+            and touches[r]
+            and (
+                not forced
+                or must[r]
+                or _outside_below_one(
+                    r, outside_up[r], x, row_ptr, successor, upper, terms, scratch
+                )
+            )
+        ):
             tail = _lead(r, s, every_row, led, left, x, choice, queue, tail)
     head = 0
     while head < tail:
@@ -87,9 +105,31 @@ def attractor(
             if inc_upper[k] > 0.0:
                 touches[r] = True
             outside_up[r] -= inc_upper[k]
-            if touches[r] and (not forced or must[r] or outside_up[r] < limit):
+            if touches[r] and (
+                not forced
+                or must[r]
+                or _outside_below_one(
+                    r, outside_up[r], x, row_ptr, successor, upper, terms, scratch
+                )
+            ):
                 tail = _lead(r, s, every_row, led, left, x, choice, queue, tail)
     return x, choice, led
+
+
+@numba.njit(cache=True, nogil=True)
+def _outside_below_one(r, approx, x, row_ptr, successor, upper, terms, scratch) -> bool:
+    """Whether the upper bounds of row ``r``'s entries outside ``x`` sum to less than 1,
+    exactly (``approx``: their float sum, kept up to date by subtraction)."""
+    a, b = row_ptr[r], row_ptr[r + 1]
+    if not near_one(approx, b - a):
+        return approx < 1.0
+    terms[0] = -1.0
+    k = 1
+    for e in range(a, b):
+        if not x[successor[e]]:
+            terms[k] = upper[e]
+            k += 1
+    return sum_sign(terms, k, scratch) < 0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

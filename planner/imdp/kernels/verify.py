@@ -26,49 +26,21 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.exact import _two_sum
+from planner.imdp.kernels.exact import _at_least, _two_sum
 from planner.imdp.kernels.rows import scratch, sort_entries
 
 _UNIT = 2.0**-53
 """Unit roundoff of double precision."""
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _grow(e, m: int, b: float) -> int:
-    """Add ``b`` to the expansion ``e[:m]`` (non-overlapping components, smallest first)
-    without error (Shewchuk's grow-expansion, zero components dropped); its new length."""
-    q = b
-    k = 0
-    for i in range(m):
-        q, h = _two_sum(q, e[i])
-        if h != 0.0:
-            e[k] = h
-            k += 1
-    e[k] = q
-    return k + 1
-
-
-@numba.njit(cache=True, nogil=True)
-def _at_least(terms, n: int, e) -> bool:
-    """Whether the exact sum of ``terms[:n]`` is at least 0 (its expansion's leading
-    component decides)."""
-    m = 0
-    for i in range(n):
-        m = _grow(e, m, terms[i])
-    for i in range(m - 1, -1, -1):
-        if e[i] != 0.0:
-            return e[i] > 0.0
-    return True
-
-
 @numba.njit(cache=True, nogil=True)
 def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, work) -> float:
     """An upper bound of the exact ``T_r(U) - U(s)`` for the row with entries ``a:b``
-    (``us = U(s)``); ``inf`` where the minimising adversary's vertex is not feasible
-    within ``slack`` on its critical entry (the tolerance with which the model accepted
-    rows that bracket 1: point intervals written in floating point rarely sum to exactly
-    1), decided in exact arithmetic. ``idx``/``keys``: scratch as long as the row;
-    ``work``: scratch of twice that length plus 8."""
+    (``us = U(s)``); ``inf`` where the minimising adversary has no vertex feasible within
+    ``slack`` on its critical entry, decided in exact arithmetic (never, with slack 0, for
+    a row that brackets 1 exactly, as the model's constructor makes every row).
+    ``idx``/``keys``: scratch as long as the row; ``work``: scratch of twice that length
+    plus 8."""
     n = b - a
     sort_entries(a, n, succ, u, 1.0 if minimizes else -1.0, idx, keys)
     # the critical position: the adversary's remaining mass runs out there
@@ -83,29 +55,22 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
             c = i
             break
         rem -= g
-    uc = u[succ[idx[c]]]
     if minimizes:
         # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c]
-        # (up to ``slack``), both sides decided exactly
+        # (up to ``slack``), both sides decided exactly; where rounding put the critical
+        # position one off, it moves (towards lower positions when p_c < l_c, higher when
+        # p_c > u_c: each move keeps the other side, so it ends at the exact vertex of a
+        # row that brackets 1)
         terms = work[: n + 3]
         e = work[n + 3 :]
-        m = 0
-        for i in range(n):
-            if i != c:
-                terms[m] = -(upper[idx[i]] if i < c else lower[idx[i]])
-                m += 1
-        ec = idx[c]
-        terms[m] = 1.0
-        terms[m + 1] = slack
-        terms[m + 2] = -lower[ec]
-        if not _at_least(terms, m + 3, e):
-            return np.inf
-        for i in range(m):
-            terms[i] = -terms[i]
-        terms[m] = -1.0
-        terms[m + 2] = upper[ec]
-        if not _at_least(terms, m + 3, e):
-            return np.inf
+        while True:
+            side = _critical_side(c, n, idx, lower, upper, slack, terms, e)
+            if side == 0:
+                break
+            c += side
+            if c < 0 or c >= n:
+                return np.inf
+    uc = u[succ[idx[c]]]
     total, tail = _two_sum(uc, -us)
     bound = abs(tail)
     size = abs(total)
@@ -121,6 +86,31 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
         size += abs(t)
         bound += p * abs(de)
     return total + bound + (2 * n + 6) * _UNIT * (size + bound)
+
+
+@numba.njit(cache=True, nogil=True)
+def _critical_side(c, n, idx, lower, upper, slack, terms, e) -> int:
+    """0 where ``p_c = 1 - sum_{i < c} u_i - sum_{i > c} l_i`` (positions in the
+    adversary's order ``idx``) lies in ``[l_c - slack, u_c + slack]`` exactly, -1 where it
+    is below, 1 where above."""
+    m = 0
+    for i in range(n):
+        if i != c:
+            terms[m] = -(upper[idx[i]] if i < c else lower[idx[i]])
+            m += 1
+    ec = idx[c]
+    terms[m] = 1.0
+    terms[m + 1] = slack
+    terms[m + 2] = -lower[ec]
+    if not _at_least(terms, m + 3, e):
+        return -1
+    for i in range(m):
+        terms[i] = -terms[i]
+    terms[m] = -1.0
+    terms[m + 2] = upper[ec]
+    if not _at_least(terms, m + 3, e):
+        return 1
+    return 0
 
 
 @numba.njit(cache=True, nogil=True)
