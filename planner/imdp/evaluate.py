@@ -35,6 +35,7 @@ from planner.imdp.kernels import (
 )
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
+from planner.imdp.shown_below import shown_below
 
 ORDER_SLACK = 1e-13
 """Successor values out of order by at most this much do not re-sort the adversary while
@@ -75,6 +76,10 @@ _FLOOR = 1e-28
 _EPS = 4.0 * np.finfo(float).eps
 """Rounding of the residual itself."""
 
+SHARPEN_ABOVE = 1e-11
+"""Where the rounding bound lowers a value by more than this, the sharper bound of
+:mod:`planner.imdp.shown_below` (checked in exact arithmetic) is tried as well."""
+
 SOLVE_MARGIN = 1e-3
 """Relative margin on a computed bound ``A^-1 rhs`` (the solve's own rounding)."""
 
@@ -100,11 +105,37 @@ class ChainError:
     """
 
     def __init__(
-        self, n_states: int, live: np.ndarray, states: np.ndarray, lu, residual: np.ndarray
+        self,
+        n_states: int,
+        live: np.ndarray,
+        states: np.ndarray,
+        lu,
+        residual: np.ndarray,
+        rows: sp.csr_matrix | None = None,
     ) -> None:
         self._n, self._live, self._states = n_states, live, states
         self._lu, self._residual = lu, residual
         """``|r|`` plus the rounding of the rows, one entry per live state."""
+        self._rows = rows
+
+    @property
+    def states(self) -> np.ndarray:
+        """The live states solved for (the chain reaches a target from them)."""
+        return self._states
+
+    def expected_stay(self) -> np.ndarray | None:
+        """``(n_states,)`` expected steps before the chain leaves its live states, ``w =
+        A^-1 1`` (0 elsewhere), refined like the values (double-double residuals);
+        ``None`` when nothing was solved."""
+        if self._lu is None or self._rows is None:
+            return None
+        rows, own = self._rows, self._states
+        indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+        w = np.zeros(self._n)
+        w[own] = self._lu.solve(np.ones(own.size))
+        for _ in range(_REFINE):
+            w[own] += self._lu.solve(chain_residual(indptr, indices, rows.data, w, own) + 1.0)
+        return w
 
     def bound(self, extra: np.ndarray | None = None) -> np.ndarray:
         """``(n_states,)`` bounds of ``|x* - x|`` (0 off the live states), for the system
@@ -252,7 +283,7 @@ def chain_reach(
                 break
             r = r_new
         rounding = row_rounding(indptr, indices, out)
-        err = ChainError(base.size, live, own, lu, np.abs(r) + rounding)
+        err = ChainError(base.size, live, own, lu, np.abs(r) + rounding, rows)
         out[own] = np.clip(out[own], 0.0, 1.0)
     return (out, err) if error else out
 
@@ -281,15 +312,16 @@ def _settled_chain(
     max_rounds: int,
 ) -> tuple[np.ndarray, ChainError | None, np.ndarray] | None:
     """The chain of ``rows`` and the adversary's best response, solved: ``(x, error,
-    defect)`` (``defect`` the order slack's error of each strategy row that keeps a chance
-    of the targets), or ``None`` when the adversary did not settle."""
+    defect, used)`` (``defect`` the order slack's error of each strategy row that keeps a
+    chance of the targets, ``used`` those rows), or ``None`` when the adversary did not
+    settle."""
     rows = np.asarray(rows, dtype=np.int64)
     states = model.row_state[rows]
     fixed_val = np.asarray(fixed_val, dtype=np.float64)
     if not adversary_minimizes:
         adv = OrderingAdversary(model, False, rows=rows)
         x, err = chain_reach(adv.matrix(start), states, fixed_val, error=True)
-        return x, err, np.zeros(rows.size)
+        return x, err, np.zeros(rows.size), rows
     row_mask = np.zeros(model.n_rows, dtype=bool)
     row_mask[rows] = True
     target = fixed_val > 0
@@ -299,7 +331,7 @@ def _settled_chain(
     base = fixed_val.copy()
     base[states] = 0.0
     if not keep.any():
-        return base, None, np.zeros(0)
+        return base, None, np.zeros(0), rows[:0]
     rows, states = rows[keep], states[keep]
     adv = OrderingAdversary(model, True, rows=rows, resort_tolerance=ORDER_SLACK)
     x = np.where(pos, start, base)
@@ -313,7 +345,7 @@ def _settled_chain(
             # the accepted order may miss the exact minimiser by the slack: its defect at
             # x is an error of the right-hand side, like the solve's residual
             exact = OrderingAdversary(model, True, rows=rows).expectation(x)
-            return x, err, np.maximum(matrix @ x - exact, 0.0)
+            return x, err, np.maximum(matrix @ x - exact, 0.0), rows
     return None
 
 
@@ -350,8 +382,14 @@ def strategy_reach_value(
     out = _settled_chain(model, rows, fixed_val, adversary_minimizes, start, max_rounds)
     if out is None:
         return None
-    x, err, defect = out
+    x, err, defect, used = out
     if err is None or not sound:
         return x.copy()
     # rounded down: the subtraction itself must not round above the bound
-    return np.maximum(np.nextafter(x - err.bound(defect), -np.inf), 0.0)
+    low = np.maximum(np.nextafter(x - err.bound(defect), -np.inf), 0.0)
+    worst = float(np.max(x - low))
+    if worst > SHARPEN_ABOVE:
+        shown = shown_below(model, used, x, err, adversary_minimizes, worst)
+        if shown is not None:
+            low = np.maximum(low, shown)
+    return low

@@ -67,17 +67,24 @@ def sum_sign(terms, n: int, e) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def sum_below(terms, n: int, e) -> float:
-    """A double at most the exact sum of ``terms[:n]``, within a few units of roundoff of
-    it (``e``: scratch of length ``n`` at least)."""
+def expansion_sum(terms, n: int, e) -> tuple[float, int]:
+    """``(approx, m)``: the exact sum of ``terms[:n]`` as an expansion of ``m``
+    non-overlapping components (in ``e``, scratch of length ``n`` at least) and their float
+    sum from the smallest, which is within ``m + 1`` ulps of the exact sum."""
     m = 0
     for i in range(n):
         m = _grow(e, m, terms[i])
     total = 0.0
     for i in range(m):
         total += e[i]
-    # summing a non-overlapping expansion from its smallest component errs by less than
-    # an ulp of the result per component; step down past that
+    return total, m
+
+
+@numba.njit(cache=True, nogil=True)
+def sum_below(terms, n: int, e) -> float:
+    """A double at most the exact sum of ``terms[:n]``, within a few units of roundoff of
+    it (``e``: scratch of length ``n`` at least)."""
+    total, m = expansion_sum(terms, n, e)
     for _ in range(m + 1):
         total = np.nextafter(total, -np.inf)
     return total

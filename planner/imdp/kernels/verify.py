@@ -26,7 +26,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.exact import _at_least, _two_sum
+from planner.imdp.kernels.exact import _at_least, _two_sum, expansion_sum
 from planner.imdp.kernels.rows import scratch, sort_entries
 
 _UNIT = 2.0**-53
@@ -34,11 +34,16 @@ _UNIT = 2.0**-53
 
 
 @numba.njit(cache=True, nogil=True)
-def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, work) -> float:
+def row_excess(
+    a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, work, below=False
+) -> float:
     """An upper bound of the exact ``T_r(U) - U(s)`` for the row with entries ``a:b``
     (``us = U(s)``); ``inf`` where the minimising adversary has no vertex feasible within
     ``slack`` on its critical entry, decided in exact arithmetic (never, with slack 0, for
     a row that brackets 1 exactly, as the model's constructor makes every row).
+    ``below``: a *lower* bound of the exact excess instead, from the adversary's greedy
+    vertex shown feasible (the minimum of a minimising adversary, a value a maximising one
+    can reach; ``-inf`` where no vertex is shown feasible).
     ``idx``/``keys``: scratch as long as the row; ``work``: scratch of twice that length
     plus 8."""
     n = b - a
@@ -55,7 +60,7 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
             c = i
             break
         rem -= g
-    if minimizes:
+    if minimizes or below:
         # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c]
         # (up to ``slack``), both sides decided exactly; where rounding put the critical
         # position one off, it moves (towards lower positions when p_c < l_c, higher when
@@ -69,7 +74,7 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
                 break
             c += side
             if c < 0 or c >= n:
-                return np.inf
+                return -np.inf if below else np.inf
     uc = u[succ[idx[c]]]
     total, tail = _two_sum(uc, -us)
     bound = abs(tail)
@@ -85,7 +90,69 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, wor
         total += t
         size += abs(t)
         bound += p * abs(de)
-    return total + bound + (2 * n + 6) * _UNIT * (size + bound)
+    margin = bound + (2 * n + 6) * _UNIT * (size + bound)
+    first = total - margin if below else total + margin
+    if (first >= 0.0) if below else (first <= 0.0):
+        return first
+    # the same pivoted on U(s): a self-loop then adds exactly 0, however much it keeps
+    other = _pivot_on_state(c, n, idx, succ, lower, upper, u, us, minimizes or below, work)
+    if below:
+        return max(first, other[0] - other[1])
+    return min(first, other[0] + other[1])
+
+
+@numba.njit(cache=True, nogil=True)
+def _pivot_on_state(c, n, idx, succ, lower, upper, u, us, vertex, work):
+    """``(total, margin)`` with ``|T_r(U) - U(s) - total| <= margin`` in the form
+    ``sum_j p_j (U_j - U(s))`` (``vertex``: the greedy vertex, shown feasible, its critical
+    mass ``p_c = 1 - sum_{j != c} p_j`` taken from an exact expansion), or, for a
+    maximising adversary without a shown vertex, the weak-duality bound at ``lambda =
+    U(s)``: ``sum_j (u_j if U_j > U(s) else l_j) (U_j - U(s))``, of which only
+    ``total + margin`` is meant."""
+    total, bound, size = 0.0, 0.0, 0.0
+    for i in range(n):
+        e = idx[i]
+        d, de = _two_sum(u[succ[e]], -us)
+        if d == 0.0 and de == 0.0:
+            continue
+        if not vertex:
+            p = upper[e] if d > 0.0 else lower[e]
+        elif i != c:
+            p = upper[e] if i < c else lower[e]
+        else:
+            terms = work[: n + 1]
+            ex = work[n + 1 :]
+            terms[0] = 1.0
+            k = 1
+            for h in range(n):
+                if h != c:
+                    terms[k] = -(upper[idx[h]] if h < c else lower[idx[h]])
+                    k += 1
+            p, m = expansion_sum(terms, k, ex)
+            bound += (2 * m + 2) * _UNIT * abs(p) * (abs(d) + abs(de)) + 2.0**-1074
+        t = p * d
+        total += t
+        size += abs(t)
+        bound += p * abs(de)
+    return total, bound + (2 * n + 6) * _UNIT * (size + bound)
+
+
+@numba.njit(cache=True, nogil=True)
+def row_deficits(rows, row_state, row_ptr, succ, lower, upper, u, minimizes):
+    """For each row of ``rows``: a lower bound of the exact ``T_r(U) - U(s)``, ``s`` its
+    state (``row_excess`` with ``below``); all of them ``>= 0`` shows ``U <= T_sigma(U)``
+    for the strategy that plays ``rows``."""
+    idx, keys = scratch(row_ptr)
+    work = np.empty(2 * idx.size + 8)
+    out = np.empty(rows.size)
+    for k in range(rows.size):
+        r = rows[k]
+        s = row_state[r]
+        a, b = row_ptr[r], row_ptr[r + 1]
+        out[k] = row_excess(
+            a, b, succ, lower, upper, u, u[s], minimizes, 0.0, idx, keys, work, True
+        )
+    return out
 
 
 @numba.njit(cache=True, nogil=True)

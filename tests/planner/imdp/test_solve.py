@@ -201,13 +201,18 @@ def test_slow_leak_closed_form():
         [1, 1, 2e-7, 2e-7, 1 - 1e-7],
         labels=[(), ("g",), ()],
     )
-    # ~3e6 steps of stay: certifiable at 1e-7 in double precision, not at 1e-8 (the default
-    # then reports an open, honest bracket)
+    # ~3e6 steps of stay: certified at the default 1e-8 too since the strategy's value is
+    # bounded from below in exact arithmetic (planner.imdp.shown_below: a self-loop adds
+    # no rounding per step); before, its rounding bound (stay x 7 eps) left it open. The
+    # bounds as written in floating point make the exact value 1/3 + 5.2e-11.
     default = solve(Problem(m, Specification(ReachAvoid("g"))))
-    assert not default.converged and default.lower[2] <= 1 / 3 <= default.upper[2]
+    exact = _slow_leak_exact(1e-7)
+    assert abs(exact - Fraction(1, 3)) < Fraction(1, 10**9)
+    assert default.converged and default.error < 1e-8
+    assert Fraction(default.lower[2]) <= exact <= Fraction(default.upper[2])
     sol = solve(Problem(m, Specification(ReachAvoid("g"))), ValueIteration(1e-7))
     assert sol.values[2] == pytest.approx(1 / 3, abs=1e-7)
-    assert sol.lower[2] <= 1 / 3 <= sol.upper[2]
+    assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
     assert sol.converged and sol.iterations < 1000 and sol.evaluations >= 1
     # plain sweeps from 0 are nowhere near after as many sweeps
     plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
@@ -215,6 +220,35 @@ def test_slow_leak_closed_form():
     assert slow.values[2] < 0.01 and not slow.converged and slow.evaluations == 0
     best = solve(Problem(m, Specification(ReachAvoid("g"), "optimistic")))
     assert best.values[2] == pytest.approx(1.0, abs=1e-8)
+
+
+def _loop_exact(lo, up, target=Fraction(1)) -> Fraction:
+    """The worst case of a state with entries ``(sink, itself, target)`` (bounds ``lo``,
+    ``up`` as written in floating point; the target worth ``target``) in rational
+    arithmetic: the adversary fills the sink, then the loop, then the target (the
+    state-ordering vertex)."""
+    lo_s, lo_self, lo_g = (Fraction(x) for x in lo)
+    up_s, up_self, _ = (Fraction(x) for x in up)
+    rem = 1 - (lo_g + lo_s + lo_self)
+    p_s = lo_s + min(up_s - lo_s, rem)
+    rem -= p_s - lo_s
+    p_self = lo_self + min(up_self - lo_self, rem)
+    rem -= p_self - lo_self
+    return (lo_g + rem) * target / (1 - p_self)
+
+
+def _slow_leak_exact(leak: float) -> Fraction:
+    """The exact worst case of ``_leaky_loop(leak)`` (1/3 up to the rounding of its
+    bounds)."""
+    return _loop_exact((0.0, 1 - 3 * leak, leak), (2 * leak, 1 - leak, 2 * leak))
+
+
+def test_a_self_loop_leaking_1e_8_per_step_is_certified_at_the_default():
+    m = _leaky_loop(1e-8)  # a stay of 3e7 steps
+    sol = solve(Problem(m, Specification(ReachAvoid("g"))))
+    exact = _slow_leak_exact(1e-8)
+    assert sol.converged and sol.error < 1e-8
+    assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -290,15 +324,24 @@ def test_local_strategy_iteration_on_a_slow_corner(monkeypatch):
         up += [2e-7, 2e-7, 1 - 1e-7]
     n = 2 + n_fast + n_slow
     m = IMDP(n, s, a, t, lo, up, labels=[(), ("g",)] + [()] * (n - 2))
-    # a stay of ~3e6 steps: rounding of ~4e-15 per step may hide 1.3e-8 from a certificate
-    # in double precision, so 1e-8 is not certifiable (the bracket stays honest) and 1e-7 is
+    # a stay of ~3e6 steps, certified at the default 1e-8 as well since the strategy's value
+    # is bounded from below in exact arithmetic (planner.imdp.shown_below); the exact
+    # values of the bounds as written in floating point
+    fast = _loop_exact((0.2, 0.0, 0.6), (0.4, 0.0, 0.8))
+    slow = _loop_exact((0.0, 1 - 3e-7, 1e-7), (2e-7, 1 - 1e-7, 2e-7), fast)
+
+    def contains(sol):
+        lo, up = sol.lower, sol.upper
+        ok = [Fraction(lo[q]) <= fast <= Fraction(up[q]) for q in range(2, 2 + n_fast)]
+        ok += [Fraction(lo[q]) <= slow <= Fraction(up[q]) for q in range(2 + n_fast, n)]
+        return all(ok)
+
     default = solve(Problem(m, Specification(ReachAvoid("g"))))
-    assert not default.converged
-    assert np.all(default.lower[2 + n_fast :] <= 0.2) and np.all(default.upper[2 + n_fast :] >= 0.2)
+    assert default.converged and default.error < 1e-8 and contains(default)
     sol = solve(Problem(m, Specification(ReachAvoid("g"))), ValueIteration(1e-7))
     assert sol.values[2 : 2 + n_fast] == pytest.approx(0.6, abs=1e-12)
     assert sol.values[2 + n_fast :] == pytest.approx(0.2, abs=1e-7)
-    assert np.all(sol.lower[2 + n_fast :] <= 0.2) and np.all(sol.upper[2 + n_fast :] >= 0.2)
+    assert contains(sol)
     assert sol.converged and sol.iterations < 200 and sol.evaluations >= 1
     plain = ValueIteration(max_iterations=1000, strategy_iteration=False)
     slow = solve(Problem(m, Specification(ReachAvoid("g"))), plain)
@@ -329,12 +372,13 @@ def test_residual_rule_stops_far_from_the_value_but_the_bracket_does_not():
     assert 1 / 3 - fast.values[2] > 1e-6  # the uncertified answer is off by far more
     sol = solve(problem)  # default: certified
     assert sol.converged and sol.error < 1e-8
-    assert sol.lower[2] <= 1 / 3 <= sol.upper[2]
+    exact = _slow_leak_exact(1e-5)  # 1/3 + 2.8e-13 with the bounds as written
+    assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
     assert sol.values.tolist() == sol.lower.tolist()
     # certified without strategy iteration: the bracket stays honest (wide) when capped
     capped = solve(problem, ValueIteration(max_iterations=2000, strategy_iteration=False))
     assert not capped.converged
-    assert capped.lower[2] <= 1 / 3 <= capped.upper[2]
+    assert Fraction(capped.lower[2]) <= exact <= Fraction(capped.upper[2])
 
 
 @pytest.mark.parametrize("zero_lower", [True, False])

@@ -38,9 +38,10 @@ def _dyadic_row(rng, k, n):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_row_excess_bounds_the_exact_excess_from_above(seed):
+def test_row_excess_bounds_the_exact_excess_from_both_sides(seed):
     # values spread, nearly equal (differences of an ulp) and equal: the bound is never
-    # below the rational excess and above it by at most a few ulps of the differences
+    # below the rational excess and above it by at most a few ulps of the differences;
+    # with ``below`` the same from underneath
     rng = np.random.default_rng(seed)
     n = 12
     idx, keys, work = np.empty(n, dtype=np.int64), np.empty(n), np.empty(2 * n + 8)
@@ -61,10 +62,28 @@ def test_row_excess_bounds_the_exact_excess_from_above(seed):
             exact = _exact_excess(succ, lo, up, u, u[s], minimizes)
             assert Fraction(got) >= exact
             assert got - float(exact) <= 1e-14 * max(1.0, float(np.ptp(u)))
+            low = row_excess(0, k, succ, lo, up, u, u[s], minimizes, 0.0, idx, keys, work, True)
+            assert Fraction(low) <= exact
+            assert float(exact) - low <= 1e-14 * max(1.0, float(np.ptp(u)))
             checked += 1
             if kind == 2 and s in succ:
                 assert got == 0.0  # equal values: exact, nothing added
     assert checked == 600
+
+
+def test_a_self_loop_adds_no_rounding_to_the_excess():
+    # a state keeps 1 - 2**-40 on itself, sends 2**-44 to the goal and 15 * 2**-44 to the
+    # sink; at its value 1/16 the excess is exactly 0. Pivoted on the critical successor
+    # (the sink) the kept mass's term alone is 1/16 and its rounding ~1e-16; pivoted on the
+    # state itself it is exactly 0 and the bounds are as tight as the exits
+    succ = np.array([0, 1, 2])
+    lo = np.array([1 - 2.0**-40, 2.0**-44, 15 * 2.0**-44])
+    u = np.array([1 / 16, 1.0, 0.0])
+    idx, keys, work = np.empty(3, dtype=np.int64), np.empty(3), np.empty(14)
+    for minimizes in (True, False):
+        hi = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, 0.0, idx, keys, work)
+        low = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, 0.0, idx, keys, work, True)
+        assert low <= 0.0 <= hi and hi - low < 1e-26
 
 
 def test_row_excess_refuses_a_vertex_it_cannot_show_feasible():
