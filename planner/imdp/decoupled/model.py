@@ -9,6 +9,7 @@ import numpy as np
 
 from planner.errors import ModelError, SpecificationError
 from planner.imdp.decoupled.operator import all_values, vertices
+from planner.imdp.entries import fresh_copy, rows_to_tighten, tighten_rows
 from planner.imdp.model import BOUND_TOLERANCE
 
 
@@ -102,7 +103,9 @@ class DecoupledIMDP:
         self, name: str, ptr, b, lo, up, size: int
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One axis's CSR ``(ptr, bin, lower, upper)``, validated: every row has a bin, bins
-        in ``[0, size)``, bounds in ``[0, 1]`` with ``lower <= upper`` that bracket 1."""
+        in ``[0, size)``, bounds in ``[0, 1]`` with ``lower <= upper`` that bracket 1; then
+        made to bracket 1 exactly, with every bin's ``lower > 0`` / ``upper > 0`` exact (a
+        copy, :func:`planner.imdp.entries.tighten_rows`)."""
         rs, ra = self.row_state, self.row_action
         ptr = np.asarray(ptr, dtype=np.int64)
         b = np.asarray(b, dtype=np.int64)
@@ -125,6 +128,11 @@ class DecoupledIMDP:
                 f"state {rs[r]}, action {ra[r]}: the {name} bounds do not bracket 1 "
                 f"(sums {s_lo[r]:.12g}, {s_up[r]:.12g})"
             )
+        # the same exact support as an IMDP row's (see planner.imdp.entries.tighten_rows)
+        loose = rows_to_tighten(ptr, lo, up, s_lo, s_up)
+        if loose.size:
+            lo, up = fresh_copy(lo), fresh_copy(up)
+            tighten_rows(loose, ptr, lo, up, s_lo, s_up)
         return ptr, b, lo, up
 
     def _set_labels(self, labels, propositions, label_matrix) -> None:

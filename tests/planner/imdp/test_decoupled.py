@@ -2,6 +2,7 @@
 enumeration of per-axis vertex distributions, the successor graph, the product's adversary
 (the grid abstraction: ``test_decoupled_abstraction.py``)."""
 
+from fractions import Fraction
 from itertools import product as cartesian
 
 import numpy as np
@@ -211,3 +212,34 @@ def relabelled(m: DecoupledIMDP, labels, **kwargs) -> DecoupledIMDP:
 def m_goal(m: DecoupledIMDP) -> DecoupledIMDP:
     """``m`` with its ``Goal`` states labelled ``goal`` (for :func:`brute_force_reach`)."""
     return relabelled(m, [("goal",) if g else () for g in m.states_labelled("Goal")])
+
+
+def test_axis_rows_get_the_exact_support_of_interval_rows():
+    # row 1's x axis: bin 0 at most 1 - 2**-45, bin 1 lower bound 0 but forced (2**-45);
+    # its y axis: bin 0 fixed at 1 (1/3 three times as written, which sums below 1) is
+    # bracketed exactly, bin 1 has no room (upper 0.5 -> 0)
+    third = 1 / 3
+    x_lo, x_up = np.array([1.0, 0.5, 0.0]), np.array([1.0, 1 - 2.0**-45, 1.0])
+    y_lo = np.array([1.0, 1.0, 0.0, third, third, third])
+    y_up = np.array([1.0, 1.0, 0.5, third, third, third])
+    m = DecoupledIMDP(
+        2,
+        np.array([0, 1, 1]),
+        np.array([0, 0, 1]),
+        np.array([0, 1, 3, 4]),
+        np.array([0, 0, 1, 0]),
+        x_lo[[0, 1, 2, 0]],
+        x_up[[0, 1, 2, 0]],
+        np.array([0, 1, 3, 6]),
+        np.array([0, 0, 1, 0, 1, 2]),
+        y_lo,
+        y_up,
+        np.array([[[0, 1, 1], [1, 1, 1], [1, 1, 1]]]),
+        np.array([0, 0, 0]),
+        n_actions=2,
+    )
+    (_, _, xl, xu), (yp, _, yl, yu) = m.axes
+    assert 2.0**-45 * (1 - 1e-14) <= xl[2] <= 2.0**-45 and xu[2] == 1.0  # rounded down
+    assert yu[2] == 0.0 and yl[1] == 1.0
+    last = slice(yp[2], yp[3])
+    assert sum(map(Fraction, yu[last].tolist())) >= 1 >= sum(map(Fraction, yl[last].tolist()))
