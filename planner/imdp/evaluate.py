@@ -30,7 +30,7 @@ from scipy.sparse.linalg import splu
 from planner.imdp import graph
 from planner.imdp.kernels import (
     backward_distance,
-    chain_residual,
+    chain_exit_residual,
     counting_order,
 )
 from planner.imdp.model import IMDP
@@ -88,7 +88,7 @@ class ChainError:
     """Elementwise rounding bounds of a :func:`chain_reach` solve.
 
     With ``A = I - P`` on the live states (non-singular, ``A^-1 >= 0``) and the residual
-    ``r = b - A x`` of the computed ``x`` (double-double, :func:`chain_residual`), the
+    ``r = b - A x`` of the computed ``x`` (double-double, :func:`chain_exit_residual`), the
     error is ``A^-1 r``, so ``|x* - x| <= A^-1 |r|`` elementwise: small where the chain
     leaves the live states fast *or* the values are small, unlike the norm bound
     ``||A^-1 1|| ||r||`` (``1e8`` steps times ``1e-16`` on a slowly mixing chain).
@@ -112,11 +112,12 @@ class ChainError:
         lu,
         residual: np.ndarray,
         rows: sp.csr_matrix | None = None,
+        lost: np.ndarray | None = None,
     ) -> None:
         self._n, self._live, self._states = n_states, live, states
         self._lu, self._residual = lu, residual
         """``|r|`` plus the rounding of the rows, one entry per live state."""
-        self._rows = rows
+        self._rows, self._lost = rows, lost
 
     @property
     def states(self) -> np.ndarray:
@@ -127,14 +128,15 @@ class ChainError:
         """``(n_states,)`` expected steps before the chain leaves its live states, ``w =
         A^-1 1`` (0 elsewhere), refined like the values (double-double residuals);
         ``None`` when nothing was solved."""
-        if self._lu is None or self._rows is None:
+        if self._lu is None or self._rows is None or self._lost is None:
             return None
-        rows, own = self._rows, self._states
+        rows, own, lost = self._rows, self._states, self._lost
         indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
         w = np.zeros(self._n)
         w[own] = self._lu.solve(np.ones(own.size))
         for _ in range(_REFINE):
-            w[own] += self._lu.solve(chain_residual(indptr, indices, rows.data, w, own) + 1.0)
+            r = chain_exit_residual(indptr, indices, rows.data, w, own, lost)
+            w[own] += self._lu.solve(r + 1.0)
         return w
 
     def bound(self, extra: np.ndarray | None = None) -> np.ndarray:
@@ -152,9 +154,13 @@ class ChainError:
         return out
 
 
-def chain_lu(sub: sp.spmatrix, orderings: ChainOrderings | None = None):
+def chain_lu(
+    sub: sp.spmatrix, orderings: ChainOrderings | None = None, exits: np.ndarray | None = None
+):
     """Sparse LU of ``A = I - sub`` for a substochastic ``sub`` (rows summing to at most 1)
-    whose chain leaves from every state (``A`` non-singular).
+    whose chain leaves from every state (``A`` non-singular). ``exits``: each row's mass
+    leaving its own state, summed from those entries; the diagonal is then ``exits``
+    instead of ``1 - sub_ss`` (which keeps nothing of a leak below ``eps``).
 
     ``A`` is then a non-singular M-matrix, weakly diagonally dominant by rows; Gaussian
     elimination keeps both properties in every Schur complement, so its pivots are positive
@@ -166,7 +172,12 @@ def chain_lu(sub: sp.spmatrix, orderings: ChainOrderings | None = None):
     one chain serves every chain of the same sparsity pattern (``orderings``:
     :class:`ChainOrderings`).
     """
-    a = (sp.identity(sub.shape[0], format="csc") - sub).tocsc()
+    if exits is None:
+        a = (sp.identity(sub.shape[0], format="csc") - sub).tocsc()
+    else:
+        off = sp.csr_matrix(sub, copy=True)
+        off.data[off.indices == np.repeat(np.arange(off.shape[0]), np.diff(off.indptr))] = 0.0
+        a = (sp.diags(exits, format="csr") - off).tocsc()
     if orderings is not None:
         return orderings.factor(a)
     return _symmetric_lu(a, "MMD_AT_PLUS_A")
@@ -255,7 +266,12 @@ def chain_reach(
     # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
     # DUST only lowers the least solution, so the value stays a lower bound.
     matrix = sp.csr_matrix(matrix, copy=True)
-    matrix.data[matrix.data < DUST] = 0.0
+    dust = matrix.data < DUST
+    # the dust that leaves a state goes to value 0, not back to the state (whose stay is
+    # implied by what leaves it below)
+    leaves = matrix.indices != np.repeat(states, np.diff(matrix.indptr))
+    lost = _row_sums(matrix.indptr, np.where(dust & leaves, matrix.data, 0.0))
+    matrix.data[dust] = 0.0
     matrix.eliminate_zeros()
     base = np.asarray(fixed_val, dtype=np.float64).copy()
     base[states] = 0.0
@@ -266,26 +282,39 @@ def chain_reach(
     out = base
     err = ChainError(base.size, live, states[live], None, np.zeros(0))
     if live.size:
-        sub = inner[live][:, live]
-        lu = chain_lu(sub, orderings)
         own = states[live].astype(np.int64)
         rows = matrix[live].tocsr()
         indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+        # each state's stay on itself is implied by what leaves it: slow leaks keep their
+        # relative precision in the matrix and in the residuals
+        lost_live = lost[live]
+        leaving = np.where(indices != np.repeat(own, np.diff(indptr)), rows.data, 0.0)
+        exits = _row_sums(indptr, leaving) + lost_live
+        lu = chain_lu(inner[live][:, live], orderings, exits)
         out[own] = lu.solve(b[live])
-        r = chain_residual(indptr, indices, rows.data, out, own)
+        r = chain_exit_residual(indptr, indices, rows.data, out, own, lost_live)
         for _ in range(_REFINE):
             if not np.any(r):
                 break
             out[own] += lu.solve(r)
-            r_new = chain_residual(indptr, indices, rows.data, out, own)
+            r_new = chain_exit_residual(indptr, indices, rows.data, out, own, lost_live)
             if np.max(np.abs(r_new)) >= np.max(np.abs(r)):
                 r = r_new
                 break
             r = r_new
         rounding = row_rounding(indptr, indices, out)
-        err = ChainError(base.size, live, own, lu, np.abs(r) + rounding, rows)
+        err = ChainError(base.size, live, own, lu, np.abs(r) + rounding, rows, lost_live)
         out[own] = np.clip(out[own], 0.0, 1.0)
     return (out, err) if error else out
+
+
+def _row_sums(indptr: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per CSR row, the sum of ``values`` (0 for an empty row)."""
+    out = np.zeros(indptr.size - 1)
+    full = np.diff(indptr) > 0
+    if values.size:
+        out[full] = np.add.reduceat(values, indptr[:-1][full])
+    return out
 
 
 def row_rounding(

@@ -5,7 +5,7 @@ their layout (:mod:`.sweeps`), end components (:mod:`.components`), graph search
 superharmonicity check in exact arithmetic (:mod:`.verify`)."""
 
 from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
-from planner.imdp.kernels.exact import chain_residual
+from planner.imdp.kernels.exact import chain_exit_residual
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     attractor,
@@ -24,7 +24,7 @@ __all__ = [
     "all_row_values",
     "attractor",
     "backward_distance",
-    "chain_residual",
+    "chain_exit_residual",
     "component_exit_bound",
     "counting_order",
     "forward_reach",

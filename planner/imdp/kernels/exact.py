@@ -105,18 +105,24 @@ def near_one(approx: float, k: int) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
-def chain_residual(indptr, indices, data, y, own) -> np.ndarray:
-    """``r_i = sum_k data[k] * y[indices[k]] - y[own[i]]`` over the CSR rows ``i``,
-    accumulated in double-double and rounded once (error at most ``2**-52 |r_i| + 2**-100``
-    times the row's absolute sum, for rows of probabilities and values in ``[0, 1]``)."""
+def chain_exit_residual(indptr, indices, data, y, own, lost) -> np.ndarray:
+    """``r_i = sum_{k: indices[k] != own[i]} data[k] (y[indices[k]] - y[own[i]]) - lost[i]
+    y[own[i]]`` over the CSR rows ``i`` in double-double, rounded once: the residual of ``x
+    = P x`` with each row's stay on its own state implied (``1 -`` the mass that leaves,
+    ``lost`` to a state of value 0 included), so that a row keeping ``1 - 1e-9`` on itself
+    is as exact as its exits (a residual ``sum_k data[k] y[k] - y[own]`` reads the rounded
+    stay and keeps nothing of a leak below ``eps``)."""
     n = indptr.size - 1
     r = np.empty(n)
     for i in range(n):
-        hi = -y[own[i]]
-        lo = 0.0
+        ys = y[own[i]]
+        hi, lo = _two_prod(-lost[i], ys)
         for k in range(indptr[i], indptr[i + 1]):
-            p, pe = _two_prod(data[k], y[indices[k]])
+            if indices[k] == own[i]:
+                continue
+            d, de = _two_sum(y[indices[k]], -ys)
+            p, pe = _two_prod(data[k], d)
             hi, e = _two_sum(hi, p)
-            lo += e + pe
+            lo += e + pe + data[k] * de
         r[i] = hi + lo
     return r

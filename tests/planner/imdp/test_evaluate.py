@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from planner.imdp.evaluate import ChainOrderings, chain_lu, chain_reach
-from planner.imdp.kernels import chain_residual
+from planner.imdp.kernels import chain_exit_residual
 
 
 def _cycle(rng: np.random.Generator, n: int, leak: float) -> sp.csr_matrix:
@@ -73,9 +73,23 @@ def test_residual_is_exact_where_double_precision_cancels():
     data = np.array([0.5, 0.5])
     y = np.array([0.5 + 1e-17, 1.0, 1e-16])
     # exact: 0.5 * 1 + 0.5 * 1e-16 - y[0] = 5e-17 - 1e-17 (y[0] rounds to 0.5) = 5e-17
-    r = chain_residual(indptr, indices, data, y, np.array([0]))
+    r = chain_exit_residual(indptr, indices, data, y, np.array([0]), np.zeros(1))
     assert r[0] == pytest.approx(5e-17, rel=1e-12)
     assert 0.5 * 1.0 + 0.5 * 1e-16 - y[0] == 0.0  # what double precision gives
+
+
+def test_the_residual_implies_the_stay_from_what_leaves():
+    # a state keeps 1 - 2**-60 on itself (not representable next to 1: it reads as 1) and
+    # leaves with 2**-61 to a state of value 1 and 2**-61 lost (value 0): its value is 1/2,
+    # where the residual is exactly 0, and at 1/4 it is 2**-61 (3/4) - 2**-61 (1/4) =
+    # 2**-62 (a residual that read the stored stay of 1 would see 2**-61 (1 - y) only)
+    indptr = np.array([0, 2])
+    indices = np.array([0, 1])
+    data = np.array([1.0, 2.0**-61])
+    own, lost = np.zeros(1, np.int64), np.array([2.0**-61])
+    assert chain_exit_residual(indptr, indices, data, np.array([0.5, 1.0]), own, lost)[0] == 0.0
+    quarter = chain_exit_residual(indptr, indices, data, np.array([0.25, 1.0]), own, lost)
+    assert quarter[0] == 2.0**-62
 
 
 def test_certified_bracket_contains_the_exact_value_of_slow_leaks():

@@ -251,6 +251,23 @@ def test_a_self_loop_leaking_1e_8_per_step_is_certified_at_the_default():
     assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
 
 
+@pytest.mark.parametrize("leak", [1e-9, 1e-10])
+def test_a_markov_chain_loop_leaking_1e_9_is_certified_at_the_default(leak):
+    # point intervals written in decimal: 1 - leak on itself, leak / 2 to the goal and to
+    # the sink. The chain's stay on the state is implied by what leaves it, so the leak
+    # keeps its relative precision (1 - fl(1 - 1e-9) is off by 5e-8 relative)
+    lo = [1 - leak, leak / 2, leak / 2, 1, 1]
+    m = IMDP(3, [0, 0, 0, 1, 2], [0] * 5, [0, 1, 2, 1, 2], lo, lo, labels=[(), ("g",), ("b",)])
+    sol = solve(Problem(m, Specification(ReachAvoid("g", "b"))))
+    entries = slice(m.row_ptr[0], m.row_ptr[1])  # state 0's row: itself, goal, sink
+    bounds = [m.lower[entries], m.upper[entries]]
+    # the adversary fills the sink, then the loop (the bounds as stored: bracketed exactly)
+    exact = _loop_exact(*([b[2], b[0], b[1]] for b in bounds))
+    assert abs(exact - Fraction(1, 2)) < Fraction(1, 10**6)
+    assert sol.converged and sol.error < 1e-8
+    assert Fraction(sol.lower[0]) <= exact <= Fraction(sol.upper[0])
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_slow_leak_matches_strategy_enumeration(seed):
     rng = np.random.default_rng(seed)
