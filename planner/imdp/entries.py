@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.exact import sum_below, sum_sign
+from planner.imdp.kernels.exact import _grow, sum_below, sum_sign
 
 
 @numba.njit(cache=True, nogil=True)
@@ -190,24 +190,32 @@ def tighten_rows(rows, row_ptr, lo, up, sum_lo, sum_up):
     longest = 1
     for r in rows:
         longest = max(longest, row_ptr[r + 1] - row_ptr[r])
-    terms = np.empty(longest + 1)
-    e = np.empty(longest + 1)
+    terms = np.empty(longest + 2)
+    e = np.empty(longest + 2)
+    free = np.empty(longest + 2)  # the expansion of 1 - sum(u), once per row
     changed = 0
     for r in rows:
         a, b = row_ptr[r], row_ptr[r + 1]
         if not (_brackets(up, a, b, terms, e, 1) and _brackets(lo, a, b, terms, e, -1)):
             changed += _bracket_exactly(lo, up, a, b, terms, e)
+        # an entry with lower bound 0 has room iff the lower bounds sum to less than 1
+        # (every entry the same); its forced mass is (1 - sum u) + u_j, one term more than
+        # the row's expansion (at most about 40 components: doubles span 2100 binary
+        # orders), so a row costs O(k) expansion steps, not O(k^2)
+        no_room = _brackets(lo, a, b, terms, e, 0)
+        m = _one_minus(up, a, b, terms, free)
         for j in range(a, b):
             if lo[j] != 0.0 or up[j] == 0.0:
                 continue
-            k = _others(terms, up, a, b, j)
-            if sum_sign(terms, k, e) > 0:
-                lo[j] = min(max(sum_below(terms, k, e), 5e-324), up[j])
+            if no_room:
+                up[j] = 0.0
                 changed += 1
                 continue
-            k = _others(terms, lo, a, b, j)
-            if sum_sign(terms, k, e) <= 0:
-                up[j] = 0.0
+            for h in range(m):
+                terms[h] = free[h]
+            terms[m] = up[j]
+            if sum_sign(terms, m + 1, e) > 0:
+                lo[j] = min(max(sum_below(terms, m + 1, e), 5e-324), up[j])
                 changed += 1
         sum_lo[r], sum_up[r] = 0.0, 0.0
         for i in range(a, b):
@@ -227,17 +235,33 @@ def fresh_copy(x):
 
 @numba.njit(cache=True, nogil=True)
 def _brackets(x, a, b, terms, e, side) -> bool:
-    """Whether ``sum x[a:b]`` is exactly at least 1 (``side = 1``) or at most 1 (-1)."""
+    """Whether ``sum x[a:b]`` is exactly at least 1 (``side = 1``), at most 1 (-1) or
+    exactly 1 or more with the float sum near it (0: the lower bounds leave no room)."""
     s = 0.0
     for i in range(a, b):
         s += x[i]
     err = (b - a + 2) * _UNIT * (s + 1.0)
-    if side * (s - 1.0) > err:
+    if side != 0 and side * (s - 1.0) > err:
         return True
+    if side == 0 and s < 1.0 - err:
+        return False
     terms[0] = -1.0
     for i in range(a, b):
         terms[1 + i - a] = x[i]
-    return side * sum_sign(terms, b - a + 1, e) >= 0
+    sign = sum_sign(terms, b - a + 1, e)
+    return sign >= 0 if side == 0 else side * sign >= 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _one_minus(x, a, b, terms, out) -> int:
+    """``1 - sum x[a:b]`` exactly, as an expansion in ``out``; its length."""
+    terms[0] = 1.0
+    for i in range(a, b):
+        terms[1 + i - a] = -x[i]
+    m = 0
+    for i in range(b - a + 1):
+        m = _grow(out, m, terms[i])
+    return m
 
 
 @numba.njit(cache=True, nogil=True)
@@ -264,15 +288,3 @@ def _bracket_exactly(lo, up, a, b, terms, e) -> int:
         lo[j] = max(np.nextafter(lo[j] - excess, -np.inf), 0.0)
         changed += 1
     return changed
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _others(terms, x, a, b, j):
-    """``terms[:k] = 1, -x_i (i != j)`` over the row ``a:b``; returns ``k``."""
-    terms[0] = 1.0
-    k = 1
-    for i in range(a, b):
-        if i != j:
-            terms[k] = -x[i]
-            k += 1
-    return k

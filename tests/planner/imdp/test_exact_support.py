@@ -120,3 +120,14 @@ def test_staying_in_a_set_needs_upper_bounds_summing_to_one_exactly():
     exact = _model({0: [(0, 0.0, 0.5), (1, 0.0, 0.5), (2, 0.0, 0.5)], 1: [(0, 1.0, 1.0)]}, 3, None)
     assert graph.may_stay_in(exact, np.array([True, True, False]))[exact.row_index[0, 0]]
     assert any(0 in c.states for c in graph.maximal_end_components(exact, mode="optimistic"))
+
+
+def test_a_long_row_is_tightened_in_linear_time():
+    # 20,000 successors with [0, 1/20000] each: every one is forced (the others leave
+    # 1/20000); one expansion per row, one more term per entry (an expansion of the others
+    # per entry took 45 s for ten such rows)
+    k = 20_000
+    m = _model({0: [(j, 0.0, 1.0 / k) for j in range(k)]}, k, None)
+    r = m.row_index[0, 0]
+    lo = m.lower[m.row_ptr[r] : m.row_ptr[r + 1]]
+    assert np.all(lo > 0) and np.all(lo <= 1.0 / k)
