@@ -63,17 +63,28 @@ def row_excess(
     if minimizes or below:
         # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c]
         # (up to ``slack``), both sides decided exactly; where rounding put the critical
-        # position one off, it moves (towards lower positions when p_c < l_c, higher when
-        # p_c > u_c: each move keeps the other side, so it ends at the exact vertex of a
-        # row that brackets 1)
+        # position off, it moves to the exact one (towards lower positions when p_c < l_c,
+        # higher when p_c > u_c: it exists for a row that brackets 1)
         terms = work[: n + 3]
         e = work[n + 3 :]
-        while True:
-            side = _critical_side(c, n, idx, lower, upper, slack, terms, e)
-            if side == 0:
-                break
-            c += side
-            if c < 0 or c >= n:
+        side = _critical_side(c, n, idx, lower, upper, slack, terms, e)
+        if side != 0:
+            # the side is +1 left of the exact critical position and -1 right of it:
+            # a bisection on the indicated side (a long row with gaps below the rounding
+            # of ``rem`` may put the float position far off)
+            first, last = (c + 1, n - 1) if side > 0 else (0, c - 1)
+            c = -1
+            while first <= last:
+                mid = (first + last) // 2
+                side = _critical_side(mid, n, idx, lower, upper, slack, terms, e)
+                if side == 0:
+                    c = mid
+                    break
+                if side > 0:
+                    first = mid + 1
+                else:
+                    last = mid - 1
+            if c < 0:
                 return -np.inf if below else np.inf
     uc = u[succ[idx[c]]]
     total, tail = _two_sum(uc, -us)
