@@ -15,6 +15,7 @@ import numba
 import numpy as np
 
 from planner.imdp.kernels.exact import _grow, sum_below, sum_sign
+from planner.imdp.kernels.rows import longest_row
 
 
 @numba.njit(cache=True, nogil=True)
@@ -187,9 +188,7 @@ def tighten_rows(rows, row_ptr, lo, up, sum_lo, sum_up):
     Each is decided in exact arithmetic (error-free expansions), so that ``lower > 0``
     (must) and ``upper > 0`` (may) are exact per entry and the sums of a row's bounds are
     exactly on their side of 1."""
-    longest = 1
-    for r in rows:
-        longest = max(longest, row_ptr[r + 1] - row_ptr[r])
+    longest = longest_row(row_ptr)
     terms = np.empty(longest + 2)
     e = np.empty(longest + 2)
     free = np.empty(longest + 2)  # the expansion of 1 - sum(u), once per row
@@ -272,19 +271,21 @@ def _bracket_exactly(lo, up, a, b, terms, e) -> int:
     changed = 0
     while not _brackets(up, a, b, terms, e, 1):
         j = a + np.argmax(up[a:b])
-        terms[0] = 1.0
-        for i in range(a, b):
-            terms[1 + i - a] = -up[i]
-        # at least the missing mass 1 - sum u, and one step more for the rounding
-        missing = -sum_below(-terms[: b - a + 1], b - a + 1, e)
-        up[j] = min(np.nextafter(up[j] + missing, np.inf), 1.0)
+        up[j] = min(np.nextafter(up[j] + _off_one(up, a, b, 1, terms, e), np.inf), 1.0)
         changed += 1
     while not _brackets(lo, a, b, terms, e, -1):
         j = a + np.argmax(lo[a:b])
-        terms[0] = -1.0
-        for i in range(a, b):
-            terms[1 + i - a] = lo[i]
-        excess = -sum_below(-terms[: b - a + 1], b - a + 1, e)
-        lo[j] = max(np.nextafter(lo[j] - excess, -np.inf), 0.0)
+        lo[j] = max(np.nextafter(lo[j] - _off_one(lo, a, b, -1, terms, e), -np.inf), 0.0)
         changed += 1
     return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def _off_one(x, a, b, side, terms, e) -> float:
+    """A double at least ``side (1 - sum x[a:b])``: the mass the upper bounds miss
+    (``side = 1``) or by which the lower bounds exceed 1 (-1), one step more for the
+    rounding of the sum."""
+    terms[0] = -side
+    for i in range(a, b):
+        terms[1 + i - a] = side * x[i]
+    return -sum_below(terms, b - a + 1, e)

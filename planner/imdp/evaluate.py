@@ -267,10 +267,12 @@ def chain_reach(
     # DUST only lowers the least solution, so the value stays a lower bound.
     matrix = sp.csr_matrix(matrix, copy=True)
     dust = matrix.data < DUST
-    # the dust that leaves a state goes to value 0, not back to the state (whose stay is
-    # implied by what leaves it below)
+    # each state's stay on itself is implied by what leaves it (slow leaks keep their
+    # relative precision in the matrix and in the residuals); the dust that leaves goes to
+    # value 0, not back to the state
     leaves = matrix.indices != np.repeat(states, np.diff(matrix.indptr))
     lost = _row_sums(matrix.indptr, np.where(dust & leaves, matrix.data, 0.0))
+    kept = _row_sums(matrix.indptr, np.where(leaves & ~dust, matrix.data, 0.0))
     matrix.data[dust] = 0.0
     matrix.eliminate_zeros()
     base = np.asarray(fixed_val, dtype=np.float64).copy()
@@ -285,12 +287,8 @@ def chain_reach(
         own = states[live].astype(np.int64)
         rows = matrix[live].tocsr()
         indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
-        # each state's stay on itself is implied by what leaves it: slow leaks keep their
-        # relative precision in the matrix and in the residuals
         lost_live = lost[live]
-        leaving = np.where(indices != np.repeat(own, np.diff(indptr)), rows.data, 0.0)
-        exits = _row_sums(indptr, leaving) + lost_live
-        lu = chain_lu(inner[live][:, live], orderings, exits)
+        lu = chain_lu(inner[live][:, live], orderings, kept[live] + lost_live)
         out[own] = lu.solve(b[live])
         r = chain_exit_residual(indptr, indices, rows.data, out, own, lost_live)
         for _ in range(_REFINE):

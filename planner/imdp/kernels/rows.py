@@ -122,10 +122,17 @@ def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, c
 @numba.njit(cache=True, nogil=True)
 def scratch(row_ptr):
     """Scratch arrays for :func:`sorted_value`, as long as the longest row."""
+    width = longest_row(row_ptr)
+    return np.empty(width, dtype=np.int64), np.empty(width)
+
+
+@numba.njit(cache=True, nogil=True)
+def longest_row(row_ptr) -> int:
+    """The most entries of a row."""
     width = 0
     for r in range(row_ptr.size - 1):
         width = max(width, row_ptr[r + 1] - row_ptr[r])
-    return np.empty(width, dtype=np.int64), np.empty(width)
+    return width
 
 
 @numba.njit(cache=True, nogil=True)

@@ -9,6 +9,7 @@ import numba
 import numpy as np
 
 from planner.imdp.kernels.exact import near_one, sum_sign
+from planner.imdp.kernels.rows import longest_row
 
 
 @numba.njit(cache=True, nogil=True)
@@ -55,9 +56,7 @@ def attractor(
     touches = np.zeros(n_rows, dtype=np.bool_)
     outside_up = np.zeros(n_rows)
     queue = np.empty(x.size, dtype=np.int64)
-    longest = 1
-    for r in range(n_rows):
-        longest = max(longest, row_ptr[r + 1] - row_ptr[r])
+    longest = longest_row(row_ptr)
     terms = np.empty(longest + 1)
     scratch = np.empty(longest + 1)
     tail = 0

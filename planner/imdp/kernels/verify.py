@@ -132,14 +132,9 @@ def _pivot_on_state(c, n, idx, succ, lower, upper, u, us, vertex, work):
             p = upper[e] if i < c else lower[e]
         else:
             terms = work[: n + 1]
-            ex = work[n + 1 :]
-            terms[0] = 1.0
-            k = 1
-            for h in range(n):
-                if h != c:
-                    terms[k] = -(upper[idx[h]] if h < c else lower[idx[h]])
-                    k += 1
-            p, m = expansion_sum(terms, k, ex)
+            k = _others_of_vertex(c, n, idx, lower, upper, terms)
+            terms[k] = 1.0
+            p, m = expansion_sum(terms, k + 1, work[n + 1 :])
             bound += (2 * m + 2) * _UNIT * abs(p) * (abs(d) + abs(de)) + 2.0**-1074
         t = p * d
         total += t
@@ -171,11 +166,7 @@ def _critical_side(c, n, idx, lower, upper, slack, terms, e) -> int:
     """0 where ``p_c = 1 - sum_{i < c} u_i - sum_{i > c} l_i`` (positions in the
     adversary's order ``idx``) lies in ``[l_c - slack, u_c + slack]`` exactly, -1 where it
     is below, 1 where above."""
-    m = 0
-    for i in range(n):
-        if i != c:
-            terms[m] = -(upper[idx[i]] if i < c else lower[idx[i]])
-            m += 1
+    m = _others_of_vertex(c, n, idx, lower, upper, terms)
     ec = idx[c]
     terms[m] = 1.0
     terms[m + 1] = slack
@@ -189,6 +180,19 @@ def _critical_side(c, n, idx, lower, upper, slack, terms, e) -> int:
     if not _at_least(terms, m + 3, e):
         return 1
     return 0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _others_of_vertex(c, n, idx, lower, upper, terms) -> int:
+    """``terms[:n - 1]`` the negated masses of the greedy vertex's entries other than the
+    critical position ``c`` (upper bounds before it, lower bounds after, in the order
+    ``idx``); returns ``n - 1``."""
+    m = 0
+    for i in range(n):
+        if i != c:
+            terms[m] = -(upper[idx[i]] if i < c else lower[idx[i]])
+            m += 1
+    return m
 
 
 @numba.njit(cache=True, nogil=True)
