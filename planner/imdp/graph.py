@@ -27,6 +27,7 @@ import scipy.sparse as sp
 from planner.errors import SpecificationError
 from planner.imdp.kernels import (
     attractor,
+    attractor_of_rows,
     backward_distance,
     forward_reach,
     maximal_end_components_kernel,
@@ -232,18 +233,23 @@ def _attractor(
     model: IMDP, start: np.ndarray, cand_rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Robust attractor: add states with a candidate row forced into the set (a work list
-    in compiled code, :func:`planner.imdp.kernels.attractor`): every state that
-    joins re-examines only the rows with an entry into it, so the whole attractor costs
-    ``O(entries of the candidate rows)``. ``choice[s]``: the row by which ``s`` joined; it
-    puts positive mass, under every adversary, into states that joined before ``s``."""
-    x, choice, _ = attractor(
-        np.asarray(start, dtype=bool),
-        np.asarray(cand_rows, dtype=bool),
-        *attractor_arrays(model),
-        False,
-        True,
-    )
+    in compiled code, :func:`planner.imdp.kernels.attractor`): every state that joins
+    re-examines only the rows with an entry into it. ``choice[s]``: the row by which ``s``
+    joined; it puts positive mass, under every adversary, into states that joined before
+    ``s``. Few candidate rows (a strategy's) are searched on their own (their own reverse
+    index: :func:`planner.imdp.kernels.attractor_of_rows`)."""
+    start, cand_rows = np.asarray(start, dtype=bool), np.asarray(cand_rows, dtype=bool)
+    rows = np.flatnonzero(cand_rows)
+    if rows.size * COMPACT_FRACTION <= model.n_rows:
+        m = model
+        return attractor_of_rows(start, rows, m.row_state, m.row_ptr, m.successor, m.lower, m.upper)
+    x, choice, _ = attractor(start, cand_rows, *attractor_arrays(model), False, True)
     return x, choice
+
+
+COMPACT_FRACTION = 8
+"""A robust attractor with at most ``1 / COMPACT_FRACTION`` of the rows as candidates runs
+on those rows alone."""
 
 
 def attractor_arrays(model: IMDP) -> tuple[np.ndarray, ...]:

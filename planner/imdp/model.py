@@ -195,15 +195,21 @@ class IMDP:
         initial: Iterable[int],
         action_names: Sequence[str],
         tolerance: float,
+        entry_row: np.ndarray | None = None,
+        row_sums: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> IMDP:
         """A model from arrays already in the internal layout and known valid (rows
         sorted by state then action, entries by successor, bounds checked): for
         constructions inside the planner (products, sub-models) that would otherwise
-        validate millions of entries again."""
+        validate millions of entries again. ``entry_row`` and ``row_sums`` (of the
+        lower and the upper bounds) are computed where not given."""
         self = cls.__new__(cls)
-        starts = row_ptr[:-1]
-        sum_lo = np.add.reduceat(lower, starts) if lower.size else np.zeros(0)
-        sum_up = np.add.reduceat(upper, starts) if upper.size else np.zeros(0)
+        if row_sums is None:
+            starts = row_ptr[:-1]
+            sum_lo = np.add.reduceat(lower, starts) if lower.size else np.zeros(0)
+            sum_up = np.add.reduceat(upper, starts) if upper.size else np.zeros(0)
+        else:
+            sum_lo, sum_up = row_sums
         self._init_arrays(
             int(n_states),
             int(n_actions),
@@ -216,6 +222,7 @@ class IMDP:
             upper,
             sum_lo,
             sum_up,
+            entry_row,
         )
         mask = np.asarray(label_matrix, dtype=bool)
         mask.setflags(write=False)
@@ -238,6 +245,7 @@ class IMDP:
         upper: np.ndarray,
         sum_lo: np.ndarray,
         sum_up: np.ndarray,
+        entry_row: np.ndarray | None = None,
     ) -> None:
         rows_per_state = np.bincount(row_state, minlength=n)
         self.n_states: int = n
@@ -252,7 +260,7 @@ class IMDP:
         self.successor: np.ndarray = successor
         self.lower: np.ndarray = lower
         self.upper: np.ndarray = upper
-        self.entry_row: np.ndarray = entry_rows(row_ptr)
+        self.entry_row: np.ndarray = entry_rows(row_ptr) if entry_row is None else entry_row
         self.row_lower_sum: np.ndarray = sum_lo
         self.row_upper_sum: np.ndarray = sum_up
         self.enabled: np.ndarray = np.zeros((n, n_act), dtype=bool)
@@ -419,8 +427,14 @@ def _raise_entry_error(code, i, s, a, t, lo, up, n, n_act) -> None:
 
 def row_entries(model: IMDP, rows: np.ndarray) -> np.ndarray:
     """Entry indices of the given rows, row after row."""
-    starts = model.row_ptr[rows]
-    lens = model.row_ptr[rows + 1] - starts
-    total = int(lens.sum())
-    offs = np.repeat(starts - np.concatenate(([0], np.cumsum(lens)[:-1])), lens)
-    return np.arange(total, dtype=np.int64) + offs
+    return entries_of_rows(model.row_ptr, rows)[0]
+
+
+def entries_of_rows(row_ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(entries, ptr)``: the entry indices of ``rows`` (of a layout with ``row_ptr``), row
+    after row, and where each row's run of them starts (``ptr[-1]`` their number)."""
+    starts = row_ptr[rows]
+    ptr = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(row_ptr[rows + 1] - starts, out=ptr[1:])
+    offs = np.repeat(starts - ptr[:-1], np.diff(ptr))
+    return np.arange(ptr[-1], dtype=np.int64) + offs, ptr

@@ -9,6 +9,7 @@ from planner.imdp.kernels.exact import chain_exit_residual
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     attractor,
+    attractor_of_rows,
     backward_distance,
     counting_order,
     forward_reach,
@@ -23,6 +24,7 @@ __all__ = [
     "ReachSweeper",
     "all_row_values",
     "attractor",
+    "attractor_of_rows",
     "backward_distance",
     "chain_exit_residual",
     "component_exit_bound",

@@ -220,3 +220,21 @@ def test_unavoidable_reach_of_a_minimising_controller():
     # an avoided state never joins, whatever its rows do
     mask, _ = minimal.unavoidable_reach(m, target, avoid=np.array([0, 0, 0, 1, 0], bool))
     assert not mask[3]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_an_attractor_over_few_rows_is_the_one_over_the_model(seed, monkeypatch):
+    """A strategy's rows are searched with their own reverse index; the states and the
+    rows by which they join are those of the search on the model's index."""
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=120, max_succ=5, zero_lower=bool(seed % 2))
+    target = rng.random(m.n_states) < 0.05
+    for fraction in (1.0, 0.3, 0.05):
+        rows = rng.random(m.n_rows) < fraction
+        monkeypatch.setattr(graph, "COMPACT_FRACTION", 0)  # the model's index
+        want = graph.robust_positive_reach(m, target, rows=rows)
+        monkeypatch.setattr(graph, "COMPACT_FRACTION", 10**9)  # the rows' own
+        got = graph.robust_positive_reach(m, target, rows=rows)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        assert want[0].sum() > target.sum() or fraction < 1

@@ -201,6 +201,24 @@ def test_layers_are_breadth_first_hop_counts_over_the_free_rows(seed):
     assert np.isfinite(got).sum() > sources.sum()
 
 
+@pytest.mark.parametrize("split", [False, True])
+def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split, monkeypatch):
+    from planner.imdp.kernels import search
+
+    # split: the two-thread scatter (large models) on a small one
+    monkeypatch.setattr(search, "SPLIT_INDEX_ENTRIES", 1 if split else 10**12)
+    m = random_imdp(np.random.default_rng(3), n_states=200, max_succ=6, zero_lower=True)
+    ptr, rows, states, lower, upper = search.incoming_index(
+        m.successor, m.entry_row, m.row_state, m.lower, m.upper, m.n_states
+    )
+    order = np.argsort(m.successor, kind="stable")
+    np.testing.assert_array_equal(ptr, np.searchsorted(m.successor[order], np.arange(201)))
+    np.testing.assert_array_equal(rows, m.entry_row[order])
+    np.testing.assert_array_equal(states, m.row_state[m.entry_row[order]])
+    np.testing.assert_array_equal(lower, m.lower[order])
+    np.testing.assert_array_equal(upper, m.upper[order])
+
+
 def _upper_start(m: IMDP) -> tuple[np.ndarray, np.ndarray]:
     """Free rows (not at the goal or the absorbing sink 0) and ``U = 1`` there, the goal at
     1 and the sink at 0."""

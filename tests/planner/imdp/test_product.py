@@ -43,6 +43,58 @@ def test_product_structure_and_initial_state():
     assert p.model.lower[sl].tolist() == [0.0, 0.8, 0.0]
 
 
+@pytest.mark.parametrize("split", [False, True])
+def test_the_product_model_is_the_one_its_constructor_would_build(split, monkeypatch):
+    from planner.imdp import product
+    from tests.planner.imdp.reference import random_imdp
+
+    # split: the two-thread layout of large products, on a small one
+    monkeypatch.setattr(product, "SPLIT_LAYOUT_ENTRIES", 1 if split else 10**12)
+    m = random_imdp(np.random.default_rng(5), n_states=60, max_succ=5, zero_lower=True)
+    labels = [("Haz",) if s % 7 == 3 else ("Goal",) if s % 11 == 5 else () for s in range(60)]
+    m = IMDP(
+        m.n_states,
+        m.row_state[m.entry_row],
+        m.row_action[m.entry_row],
+        m.successor,
+        m.lower,
+        m.upper,
+        n_actions=m.n_actions,
+        labels=labels,
+    )
+    aut = until_automaton()
+    p = ProductIMDP(m, aut)
+    nq, delta, letters = p.n_q, aut.transitions, p.letters
+    q = np.arange(nq)
+    # every model entry once per automaton state, from (s, q) to (t, delta(q, L(t)))
+    src = (m.row_state[m.entry_row][:, None] * nq + q).ravel()
+    act = np.repeat(m.row_action[m.entry_row], nq)
+    dst = (m.successor[:, None] * nq + delta[q[None, :], letters[m.successor][:, None]]).ravel()
+    want = IMDP(
+        p.n_states,
+        src,
+        act,
+        dst,
+        np.repeat(m.lower, nq),
+        np.repeat(m.upper, nq),
+        n_actions=m.n_actions,
+    )
+    got = p.model
+    for name in (
+        "row_state",
+        "row_action",
+        "row_ptr",
+        "successor",
+        "lower",
+        "upper",
+        "entry_row",
+        "row_lower_sum",
+        "row_upper_sum",
+        "state_ptr",
+    ):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+
 def test_the_product_answers_the_automaton_questions_of_a_product_state():
     # corridor: cell 0 Haz, cell 4 Goal; automaton 0 waiting, 1 accepted, 2 rejected
     g, m = corridor()
