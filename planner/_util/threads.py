@@ -18,6 +18,8 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 from typing import TypeVar
 
+import numpy as np
+
 A = TypeVar("A")
 B = TypeVar("B")
 
@@ -60,3 +62,13 @@ def concurrently(
         wait([future])
         raise
     return future.result(), out
+
+
+def in_halves(fill: Callable[[int, int], object], work: np.ndarray, purpose: str) -> None:
+    """``fill(first, last)`` over ``[0, n)`` in two calls at once, ``n = len(work) - 1``,
+    cut where the cumulative ``work`` (``work[i]``: the work before ``i``) reaches half of
+    ``work[-1]``: ``fill(0, cut)`` on the worker of ``purpose``, ``fill(cut, n)`` here.
+    The two calls must write disjoint data."""
+    n = work.size - 1
+    cut = min(int(np.searchsorted(work, work[-1] // 2)), n)
+    concurrently(lambda: fill(0, cut), lambda: fill(cut, n), purpose)

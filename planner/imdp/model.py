@@ -195,21 +195,16 @@ class IMDP:
         initial: Iterable[int],
         action_names: Sequence[str],
         tolerance: float,
-        entry_row: np.ndarray | None = None,
-        row_sums: tuple[np.ndarray, np.ndarray] | None = None,
+        entry_row: np.ndarray,
+        row_sums: tuple[np.ndarray, np.ndarray],
     ) -> IMDP:
         """A model from arrays already in the internal layout and known valid (rows
-        sorted by state then action, entries by successor, bounds checked): for
-        constructions inside the planner (products, sub-models) that would otherwise
-        validate millions of entries again. ``entry_row`` and ``row_sums`` (of the
-        lower and the upper bounds) are computed where not given."""
+        sorted by state then action, entries by successor, bounds checked), with each
+        entry's row and the sums of each row's lower and upper bounds: for constructions
+        inside the planner (products) that would otherwise validate millions of entries
+        again."""
         self = cls.__new__(cls)
-        if row_sums is None:
-            starts = row_ptr[:-1]
-            sum_lo = np.add.reduceat(lower, starts) if lower.size else np.zeros(0)
-            sum_up = np.add.reduceat(upper, starts) if upper.size else np.zeros(0)
-        else:
-            sum_lo, sum_up = row_sums
+        sum_lo, sum_up = row_sums
         self._init_arrays(
             int(n_states),
             int(n_actions),

@@ -21,9 +21,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner._util.threads import concurrently
+from planner._util.threads import in_halves
 from planner.automaton import RabinAutomaton
 from planner.errors import ProductError
+from planner.imdp.kernels.search import SPLIT_ENTRIES
 from planner.imdp.model import IMDP
 
 #: Most product states ``n_states x n_q`` and transitions (successor entries of the model
@@ -187,13 +188,6 @@ class ProductIMDP:
         return np.stack(self.bad)
 
 
-SPLIT_LAYOUT_ENTRIES = 1_000_000
-"""Products with at least this many entries are laid out on two threads (each fills the
-rows of one half of the model states): the writes and their first-touch page faults
-dominate; the 100 x 100 benchmark grid's product (4.3M entries) takes 0.035 s instead of
-0.07 s, its row of every entry and row sums included."""
-
-
 def _product_layout(
     model: IMDP, delta: np.ndarray, letters: np.ndarray, nq: int
 ) -> tuple[np.ndarray, ...]:
@@ -210,14 +204,11 @@ def _product_layout(
     fields = (m.state_ptr, m.row_ptr, m.row_action, m.successor, m.lower, m.upper)
     fields += (m.row_lower_sum, m.row_upper_sum, delta, letters, nq, row_start, entry_start)
     n = m.n_states
-    if entry_start[-1] < SPLIT_LAYOUT_ENTRIES:
+    if entry_start[-1] < SPLIT_ENTRIES:
         _layout_states(*fields, 0, n, *out)
     else:
-        half = int(np.searchsorted(entry_start, entry_start[-1] // 2))
-        concurrently(
-            lambda: _layout_states(*fields, 0, half, *out),
-            lambda: _layout_states(*fields, half, n, *out),
-            "index",
+        in_halves(
+            lambda first, last: _layout_states(*fields, first, last, *out), entry_start, "index"
         )
     out[2][-1] = entry_start[-1]
     return out

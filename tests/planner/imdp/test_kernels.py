@@ -206,7 +206,7 @@ def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split,
     from planner.imdp.kernels import search
 
     # split: the two-thread scatter (large models) on a small one
-    monkeypatch.setattr(search, "SPLIT_INDEX_ENTRIES", 1 if split else 10**12)
+    monkeypatch.setattr(search, "SPLIT_ENTRIES", 1 if split else 10**12)
     m = random_imdp(np.random.default_rng(3), n_states=200, max_succ=6, zero_lower=True)
     ptr, rows, states, lower, upper = search.incoming_index(
         m.successor, m.entry_row, m.row_state, m.lower, m.upper, m.n_states

@@ -49,7 +49,7 @@ def test_the_product_model_is_the_one_its_constructor_would_build(split, monkeyp
     from tests.planner.imdp.reference import random_imdp
 
     # split: the two-thread layout of large products, on a small one
-    monkeypatch.setattr(product, "SPLIT_LAYOUT_ENTRIES", 1 if split else 10**12)
+    monkeypatch.setattr(product, "SPLIT_ENTRIES", 1 if split else 10**12)
     m = random_imdp(np.random.default_rng(5), n_states=60, max_succ=5, zero_lower=True)
     labels = [("Haz",) if s % 7 == 3 else ("Goal",) if s % 11 == 5 else () for s in range(60)]
     m = IMDP(
