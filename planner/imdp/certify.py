@@ -99,7 +99,7 @@ def verify_upper(
     inc_ptr, _, inc_state, _, _ = m.reverse_index()
 
     def one_pass() -> int:
-        return raise_pass(*args, maximize, adversary_minimizes, 0.0, due, inc_ptr, inc_state)
+        return raise_pass(*args, maximize, adversary_minimizes, due, inc_ptr, inc_state)
 
     shown, _ = _until_clean(one_pass, passes)
     return shown, out

@@ -34,13 +34,11 @@ _UNIT = 2.0**-53
 
 
 @numba.njit(cache=True, nogil=True)
-def row_excess(
-    a, b, succ, lower, upper, u, us, minimizes, slack, idx, keys, work, below=False
-) -> float:
+def row_excess(a, b, succ, lower, upper, u, us, minimizes, idx, keys, work, below=False) -> float:
     """An upper bound of the exact ``T_r(U) - U(s)`` for the row with entries ``a:b``
-    (``us = U(s)``); ``inf`` where the minimising adversary has no vertex feasible within
-    ``slack`` on its critical entry, decided in exact arithmetic (never, with slack 0, for
-    a row that brackets 1 exactly, as the model's constructor makes every row).
+    (``us = U(s)``); ``inf`` where the minimising adversary has no feasible vertex,
+    decided in exact arithmetic (never for a row that brackets 1 exactly, as the model's
+    constructor makes every row).
     ``below``: a *lower* bound of the exact excess instead, from the adversary's greedy
     vertex shown feasible (the minimum of a minimising adversary, a value a maximising one
     can reach; ``-inf`` where no vertex is shown feasible).
@@ -61,13 +59,13 @@ def row_excess(
             break
         rem -= g
     if minimizes or below:
-        # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c]
-        # (up to ``slack``), both sides decided exactly; where rounding put the critical
+        # the vertex must be feasible: p_c = 1 - sum of the others within [l_c, u_c],
+        # both sides decided exactly; where rounding put the critical
         # position off, it moves to the exact one (towards lower positions when p_c < l_c,
         # higher when p_c > u_c: it exists for a row that brackets 1)
         terms = work[: n + 3]
         e = work[n + 3 :]
-        side = _critical_side(c, n, idx, lower, upper, slack, terms, e)
+        side = _critical_side(c, n, idx, lower, upper, terms, e)
         if side != 0:
             # the side is +1 left of the exact critical position and -1 right of it:
             # a bisection on the indicated side (a long row with gaps below the rounding
@@ -76,7 +74,7 @@ def row_excess(
             c = -1
             while first <= last:
                 mid = (first + last) // 2
-                side = _critical_side(mid, n, idx, lower, upper, slack, terms, e)
+                side = _critical_side(mid, n, idx, lower, upper, terms, e)
                 if side == 0:
                     c = mid
                     break
@@ -155,29 +153,26 @@ def row_deficits(rows, row_state, row_ptr, succ, lower, upper, u, minimizes):
         r = rows[k]
         s = row_state[r]
         a, b = row_ptr[r], row_ptr[r + 1]
-        out[k] = row_excess(
-            a, b, succ, lower, upper, u, u[s], minimizes, 0.0, idx, keys, work, True
-        )
+        out[k] = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, idx, keys, work, True)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _critical_side(c, n, idx, lower, upper, slack, terms, e) -> int:
+def _critical_side(c, n, idx, lower, upper, terms, e) -> int:
     """0 where ``p_c = 1 - sum_{i < c} u_i - sum_{i > c} l_i`` (positions in the
-    adversary's order ``idx``) lies in ``[l_c - slack, u_c + slack]`` exactly, -1 where it
-    is below, 1 where above."""
+    adversary's order ``idx``) lies in ``[l_c, u_c]`` exactly, -1 where it is below, 1
+    where above."""
     m = _others_of_vertex(c, n, idx, lower, upper, terms)
     ec = idx[c]
     terms[m] = 1.0
-    terms[m + 1] = slack
-    terms[m + 2] = -lower[ec]
-    if not _at_least(terms, m + 3, e):
+    terms[m + 1] = -lower[ec]
+    if not _at_least(terms, m + 2, e):
         return -1
     for i in range(m):
         terms[i] = -terms[i]
     terms[m] = -1.0
-    terms[m + 2] = upper[ec]
-    if not _at_least(terms, m + 3, e):
+    terms[m + 1] = upper[ec]
+    if not _at_least(terms, m + 2, e):
         return 1
     return 0
 
@@ -207,7 +202,6 @@ def raise_pass(
     u,
     maximize,
     minimizes,
-    slack,
     due,
     inc_ptr,
     inc_state,
@@ -236,7 +230,7 @@ def raise_pass(
         for j in range(state_rows[k], state_rows[k + 1]):
             r = rows[j]
             a, b = row_ptr[r], row_ptr[r + 1]
-            x = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, slack, idx, keys, work)
+            x = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, idx, keys, work)
             worst = max(worst, x) if maximize else min(worst, x)
         if worst > 0.0:
             raised += 1

@@ -58,11 +58,11 @@ def test_row_excess_bounds_the_exact_excess_from_both_sides(seed):
         succ, lo, up = _dyadic_row(rng, k, n)
         s = int(rng.integers(n))
         for minimizes in (True, False):
-            got = row_excess(0, k, succ, lo, up, u, u[s], minimizes, 0.0, idx, keys, work)
+            got = row_excess(0, k, succ, lo, up, u, u[s], minimizes, idx, keys, work)
             exact = _exact_excess(succ, lo, up, u, u[s], minimizes)
             assert Fraction(got) >= exact
             assert got - float(exact) <= 1e-14 * max(1.0, float(np.ptp(u)))
-            low = row_excess(0, k, succ, lo, up, u, u[s], minimizes, 0.0, idx, keys, work, True)
+            low = row_excess(0, k, succ, lo, up, u, u[s], minimizes, idx, keys, work, True)
             assert Fraction(low) <= exact
             assert float(exact) - low <= 1e-14 * max(1.0, float(np.ptp(u)))
             checked += 1
@@ -81,23 +81,22 @@ def test_a_self_loop_adds_no_rounding_to_the_excess():
     u = np.array([1 / 16, 1.0, 0.0])
     idx, keys, work = np.empty(3, dtype=np.int64), np.empty(3), np.empty(14)
     for minimizes in (True, False):
-        hi = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, 0.0, idx, keys, work)
-        low = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, 0.0, idx, keys, work, True)
+        hi = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, idx, keys, work)
+        low = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, idx, keys, work, True)
         assert low <= 0.0 <= hi and hi - low < 1e-26
 
 
 def test_row_excess_refuses_a_vertex_it_cannot_show_feasible():
-    # the bounds bracket 1 only within 1e-12: the minimising adversary's vertex is shown
-    # only with that slack on its critical entry
+    # the bounds bracket 1 only within 1e-12 (not tightened as the model's constructor
+    # would): the minimising adversary has no feasible vertex to show
     succ = np.array([0, 1])
     lo = np.array([0.5, 0.5 - 1e-12])
     up = lo.copy()
     u = np.array([0.25, 0.75])
     idx, keys, work = np.empty(2, dtype=np.int64), np.empty(2), np.empty(12)
-    assert row_excess(0, 2, succ, lo, up, u, 0.6, True, 0.0, idx, keys, work) == np.inf
-    assert row_excess(0, 2, succ, lo, up, u, 0.6, True, 1e-9, idx, keys, work) < np.inf
+    assert row_excess(0, 2, succ, lo, up, u, 0.6, True, idx, keys, work) == np.inf
     # the maximising adversary's bound needs no vertex (weak duality)
-    assert row_excess(0, 2, succ, lo, up, u, 0.6, False, 0.0, idx, keys, work) < np.inf
+    assert row_excess(0, 2, succ, lo, up, u, 0.6, False, idx, keys, work) < np.inf
 
 
 def test_a_slow_exit_is_not_certified_away():
