@@ -267,7 +267,6 @@ def exact_strategy_value(model: IMDP, target: np.ndarray, strategy: dict[int, in
     a path to the target are 0. Adversary policy iteration:
     sort the successors by value, hand out the remaining mass in that order, solve the
     chain exactly (Gauss-Jordan over ``Fraction``), until the values repeat."""
-
     rows = rows_of(model)
     n = model.n_states
     val = [Fraction(1) if target[q] else Fraction(0) for q in range(n)]
