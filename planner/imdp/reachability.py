@@ -15,23 +15,28 @@ full).
 **From above** (``certified``): the value is the *least* fixed point of the Bellman
 operator ``T`` (targets at 1), so by Knaster-Tarski every superharmonic ``U``
 (``T(U) <= U``) is an upper bound; no end-component analysis is needed to *check* one.
-Maximal reachability against a minimising adversary first runs interval iteration
-(:mod:`planner.imdp.interval`). Otherwise (or when that stalls), when a full sweep from
-below changes no value by the current goal (``tolerance`` at first), the candidate
-``U = min(1, L + tolerance / 2)`` is checked by passes of
+Maximal reachability against a minimising adversary runs interval iteration
+(:mod:`planner.imdp.interval`); where that gives up (its bound from above stalled over
+most free states, or after its repairs), at most ``_STALLED_SWEEPS`` sweeps from below
+(with strategy iteration on the few states still moving) and the candidate below finish
+the solve, on at most ``GLOBAL_REPAIR_STATES`` free states once more with the values made
+exact; the bracket is left open where that fails (:meth:`_ReachSweeps.finish_stalled`).
+Otherwise, when a full sweep from below changes no value by the current goal
+(``tolerance`` at first), the candidate ``U = min(1, L + tolerance / 2)`` is checked by passes of
 :func:`planner.imdp.kernels.upper_sweep` (optimistic value iteration, Hartmanns and
 Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` (in floating point,
 up to ``ROUNDING``) accepts ``U``.
 Candidates fail where the values from below still move (a slow leak, or mass that
 circulates long among free states): then, for maximal reachability on at most
-``_SI_MAX_STATES`` free states, strategy iteration makes the values exact (the least fixed
+``SI_MAX_STATES`` free states, strategy iteration makes the values exact (the least fixed
 point, at which the candidate passes), else the goal is divided by 8 and the sweeps
 continue. After ``_OVI_TRIES`` failures the upper bound is iterated from the trivial
 superharmonic ``U = 1`` instead, each pass again a sound upper bound (it may stall above the
 value inside end components that the opposing side can hold; the bracket then stays wide
 and ``converged`` is ``False``).
 
-**The certificate**: the accepted bound, raised by :func:`rounding_widened`, counts only once
+**The certificate**: the accepted bound, raised by
+:func:`planner.imdp.widening.rounding_widened`, counts only once
 :func:`planner.imdp.certify.verify_upper` shows it superharmonic in exact arithmetic
 (``ReachResult.verified``); the floating-point checks above only steer. Where the raise
 would open a closed bracket (long stays: it sums an allowance along them), the bound as it
@@ -52,18 +57,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from planner.imdp import certify, strategy
-from planner.imdp.interval import FULL_EVERY, LOCAL_FRACTION, interval_iteration
-from planner.imdp.kernels import ReachSweeper, backward_distance
-from planner.imdp.kernels.sweeps import ROUNDING
-from planner.imdp.model import IMDP, first_of_runs, run_ids
-from planner.imdp.problem import ValueIteration
-from planner.imdp.stay import (
-    chain_stay_allowance,
-    shortest_stay,
-    stay_limit,
-    surest_exit_start,
-    widening_room,
+from planner.imdp.interval import (
+    FULL_EVERY,
+    GLOBAL_REPAIR_STATES,
+    LOCAL_FRACTION,
+    interval_iteration,
 )
+from planner.imdp.kernels import ReachSweeper, backward_distance
+from planner.imdp.model import IMDP
+from planner.imdp.problem import ValueIteration
+from planner.imdp.strategy import SI_MAX_STATES
+from planner.imdp.widening import rounding_widened
 
 _OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
@@ -91,9 +95,15 @@ above the rounding of a row's value (a few ``eps``), so that noise does not swit
 _MIN_GOAL = 1e-15
 """The smallest residual goal the sweeps from below are driven to."""
 
-_SI_MAX_STATES = 20_000
-"""Strategy iteration only for at most this many free states: its sparse LU solves can
-fill in badly on large unstructured graphs (a 3000-state random model: ~0.5 s each)."""
+_STALLED_SWEEPS = 4
+"""Full sweeps from below after interval iteration gave up (each followed by strategy
+iteration on the few states still moving). More work did not close such brackets where
+the free states are many: on the 100 x 100 benchmark grid (seeds 3-5, 7, 9-13: states of
+value near 1 that the controller can keep among free states for 1e11 steps and more) the
+sweeps, the strategy iteration on all 9,905 free states that made the values exact and
+the passes from above that followed took 2-20 s and closed none. On few free states that
+strategy iteration is cheap and can close the bracket (random 60-state models whose
+interval iteration is stopped before its repairs)."""
 
 _FIRST_EVALUATION = 16
 """Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
@@ -228,6 +238,20 @@ class _ReachSweeps:
         if x is not None:
             self.v = np.maximum(self.v, x)
 
+    def _make_exact(self) -> bool:
+        """Strategy iteration on all free states with the certificate's fine switching
+        (once per solve); whether it changed the values."""
+        self.exacted = True
+        before = self.v
+        self._strategy_iteration(
+            self.free_rows,
+            self.fixed_val,
+            max_rounds=_CERTIFY_ROUNDS,
+            keep_sigma=True,
+            tol=max(self.alg.tolerance * _CERTIFY_SLACK, _CERTIFY_FLOOR),
+        )
+        return self.v is not before
+
     def candidate(self) -> tuple[np.ndarray | None, int]:
         return certify.optimistic_candidate(self.sweeper, self.v, self.alg.tolerance / 2)
 
@@ -237,18 +261,9 @@ class _ReachSweeps:
         to stop (certified, or out of tries)."""
         u, passes = self.candidate()
         self.upper_sweeps += passes
-        if u is None and self.use_si and not self.exacted and self.n_free <= _SI_MAX_STATES:
+        if u is None and self.use_si and not self.exacted and self.n_free <= SI_MAX_STATES:
             # make the values from below exact (the least fixed point), then check
-            self.exacted = True
-            before = self.v
-            self._strategy_iteration(
-                self.free_rows,
-                self.fixed_val,
-                max_rounds=_CERTIFY_ROUNDS,
-                keep_sigma=True,
-                tol=max(self.alg.tolerance * _CERTIFY_SLACK, _CERTIFY_FLOOR),
-            )
-            if self.v is not before:
+            if self._make_exact():
                 u, passes = self.candidate()
                 self.upper_sweeps += passes
         if u is not None:
@@ -262,19 +277,57 @@ class _ReachSweeps:
         self.goal = max(self.goal / 8.0, _MIN_GOAL)
         return False
 
+    def _raise_moving(self, before: np.ndarray) -> bool:
+        """Strategy iteration on the states that moved by at least the tolerance since
+        ``before``, the others held at their current values, when they are at most
+        ``LOCAL_FRACTION`` of the free states; whether it ran."""
+        moving = self.v - before >= self.alg.tolerance
+        if not 0 < moving.sum() <= LOCAL_FRACTION * self.n_free:
+            return False
+        local_rows = self.free_rows[moving[self.m.row_state[self.free_rows]]]
+        self._strategy_iteration(local_rows, np.where(moving, 0.0, self.v))
+        return True
+
     def check_progress(self, before: np.ndarray) -> None:
         """At a check: strategy iteration on the states still moving (few of them) or, if
         the sweeps creep, on all free states."""
         self.next_eval *= 2
-        v, tol = self.v, self.alg.tolerance
-        moving = v - before >= tol
-        if 0 < moving.sum() <= LOCAL_FRACTION * self.n_free:
-            # the states still moving, with the others held at their current values
-            m, free_rows = self.m, self.free_rows
-            local_rows = free_rows[moving[m.row_state[free_rows]]]
-            self._strategy_iteration(local_rows, np.where(moving, 0.0, v))
-        elif self.n_free <= _SI_MAX_STATES and _creeping(self.history, tol):
+        if self._raise_moving(before):
+            return
+        if self.n_free <= SI_MAX_STATES and _creeping(self.history, self.alg.tolerance):
             self._strategy_iteration(self.free_rows, self.fixed_val, keep_sigma=True)
+
+    def finish_stalled(self) -> None:
+        """After interval iteration gave up (its bound from above stalled): at most
+        ``_STALLED_SWEEPS`` full sweeps from below, each followed by strategy iteration
+        on the states still moving when they are few, then the candidate ``L + tolerance
+        / 2``; where it fails and the free states are at most ``GLOBAL_REPAIR_STATES``
+        (cheap), once more after strategy iteration has made the values exact. Where
+        that fails too, the bound from above stays the interval iteration's (a sound
+        bound after every pass) and the bracket stays open."""
+        for _ in range(_STALLED_SWEEPS):
+            if self.it >= self.alg.max_iterations:
+                break
+            before = self.v.copy()
+            self.it += 1
+            self.residual = self.sweeper.sweep(self.v, True)
+            if self.alg.callback is not None:
+                self.alg.callback(self.it, self.residual)
+            if not self._raise_moving(before):
+                break
+        if self._candidate_closes() or self.n_free > GLOBAL_REPAIR_STATES:
+            return
+        if self._make_exact():
+            self._candidate_closes()
+
+    def _candidate_closes(self) -> bool:
+        """The candidate ``L + tolerance / 2`` checked, kept in ``upper`` where it passes;
+        whether the bracket is closed."""
+        u, passes = self.candidate()
+        self.upper_sweeps += passes
+        if u is not None:
+            self.upper = np.minimum(self.upper, u)
+        return bool(np.max(self.upper - self.v) < self.alg.tolerance)
 
     def sweeps(self) -> None:
         """Sweeps from below with the certificate attempts and the creep checks."""
@@ -359,11 +412,15 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
     """One solve: the result (certified: widened for rounding), and whether the bracket
     was below the tolerance before the widening."""
     alg = run.alg
-    if not (
-        alg.certified and run.maximize and run.adversary_minimizes and run.interval_iteration()
-    ):
+    if not (alg.certified and run.maximize and run.adversary_minimizes):
         run.sweeps()
         run.fallback()
+    elif not run.interval_iteration():
+        if run.use_si:
+            run.finish_stalled()
+        else:
+            run.sweeps()
+            run.fallback()
     result = run.result()
     if not alg.certified:
         return result, False
@@ -392,85 +449,3 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
     )
     result.upper = shown if result.verified else widened
     return result, closed
-
-
-def rounding_widened(
-    m: IMDP,
-    free_rows: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    adversary_minimizes: bool,
-    maximize: bool,
-    tolerance: float,
-    sweeper: ReachSweeper,
-) -> np.ndarray:
-    """``upper`` plus what rounding may have hidden from the floating-point checks: the
-    candidate that :func:`planner.imdp.certify.verify_upper` checks in exact arithmetic
-    (the proof; this raise lets it pass in 3-4 passes instead of 7-10).
-
-    The checks accept ``T(U) <= U + ROUNDING`` and every evaluation is rounded, so along a
-    strategy ``sigma`` whose rows satisfy that (with the adversary ``P`` of ``U``), ``U``
-    is only known to be at least ``V_sigma - A^-1 e`` (``e`` the allowance per step,
-    :func:`planner.imdp.stay.chain_stay_allowance`; 0 where that chain never leaves the
-    free states, the strategy's value there being 0). ``U + A^-1 e`` of an optimal
-    strategy would bound ``V*``; the strategy taken stands in for one:
-
-    * minimising strategy: the strategy greedy for ``U`` (a true witness);
-    * maximising strategy: among the rows within ``U - L`` of the best at ``U`` (where an
-      optimal strategy's rows lie *if* ``U`` bounds ``V*``, which is what is to be shown:
-      no proof) one of short stay: the greedy surest exit
-      (:func:`planner.imdp.stay.surest_exit_start`), shortened by policy iteration
-      (:func:`planner.imdp.stay.shortest_stay`) up to ``_SI_MAX_STATES`` free
-      states, beyond which no sparse LU runs, until the widening fits in the room left to
-      ``tolerance`` (or a tenth of an open bracket;
-      :func:`planner.imdp.stay.widening_room`). A slow exit below the allowance can
-      escape it (7/8 was once certified as ``[0.9999999975, 1)``); not the exact check.
-
-    Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
-
-    ``sweeper``: the layout of ``free_rows`` that computed the bracket; its critical
-    successors give the adversary's distributions at ``upper`` without sorting every row
-    again (:meth:`planner.imdp.kernels.ReachSweeper.adversary_matrix`: on the random
-    100k-state benchmark model 0.10-0.13 s instead of 0.24 s).
-    """
-    rs = m.row_state[free_rows]
-    seg = first_of_runs(rs)
-    st = rs[seg]
-    stay = None  # the chosen chain's expected stays, when a policy iteration found them
-    # one distribution per free row, the adversary's at ``upper``: every chain below is a
-    # selection of its rows
-    matrix = sweeper.adversary_matrix(upper)
-    q = matrix @ upper
-    if maximize:
-        slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING
-        near = np.flatnonzero(q >= np.maximum.reduceat(q, seg)[run_ids(rs)] - slack)
-        cand = free_rows[near]
-        crs = rs[near]
-        cseg = first_of_runs(crs)
-        pick = surest_exit_start(matrix[near], crs)
-        if (pick < 0).any():
-            # where no chain of the near rows leaves, rows that move towards the settled
-            # states (a robust attractor; states at 0 count as settled)
-            first = strategy.strategy_rows(
-                m, cand, q[near], cseg, crs[cseg], upper, True, True, 1.0
-            )
-            pick = np.where(pick >= 0, pick, np.searchsorted(cand, first[crs[cseg]]))
-        if st.size <= _SI_MAX_STATES:  # policy iteration by sparse LU
-            room = widening_room(lower[st], upper[st], tolerance)
-            limit = stay_limit(matrix[near], upper, ROUNDING, room)
-            # an open bracket's room is a tenth of its width: there the stays are solved
-            # for, not bounded, so that the widening stays as small as they are
-            closing = float(np.max(upper[st] - lower[st])) < tolerance
-            pick, stay = shortest_stay(
-                matrix[near], crs, pick, limit=limit, block_limit=limit if closing else 0.0
-            )
-        chosen = near[pick]
-    else:
-        choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
-        chosen = np.searchsorted(free_rows, np.sort(choice[st]))
-    allowance = chain_stay_allowance(
-        matrix[chosen], rs[chosen], upper, ROUNDING, _SI_MAX_STATES, stay=stay
-    )
-    out = upper.copy()
-    out[st] = np.minimum(1.0, upper[st] + allowance[st])
-    return out

@@ -18,6 +18,11 @@ from planner.imdp.stay import surest_exit_start
 MAX_IMPROVEMENTS = 100
 """Strategy improvement rounds per strategy iteration."""
 
+SI_MAX_STATES = 20_000
+"""Strategy iteration (and the stay policy iteration of the rounding widening) only for at
+most this many free states: its sparse LU solves can fill in badly on large unstructured
+graphs (a 3000-state random model: ~0.5 s each)."""
+
 
 def strategy_iteration(
     m: IMDP,

@@ -526,3 +526,37 @@ def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
     sol = solve(Problem(m, spec), ValueIteration(1e-12))
     assert sol.converged and sol.error < 1e-12
     assert len(calls) == 2 and calls[1] == pytest.approx(calls[0] / 4)
+
+
+@pytest.mark.parametrize("cheap", [True, False])
+def test_a_stalled_interval_iteration_is_finished_in_a_few_sweeps(monkeypatch, cheap):
+    # interval iteration stopped at its first stalled window (no repairs): the solve ends
+    # after at most ``_STALLED_SWEEPS`` sweeps from below with a sound bracket; on few
+    # free states the values made exact close it, above ``GLOBAL_REPAIR_STATES`` it stays
+    # open where the candidate fails
+    interval = importlib.import_module("planner.imdp.interval")
+    monkeypatch.setattr(interval, "_II_REPAIRS", 0)
+    monkeypatch.setattr(interval, "_II_WINDOW", 4)
+    if not cheap:
+        monkeypatch.setattr(solve_module, "GLOBAL_REPAIR_STATES", 0)
+    finish = solve_module._ReachSweeps.finish_stalled
+    finished: list[int] = []
+
+    def counted(run):
+        start = run.it
+        finish(run)
+        finished.append(run.it - start)
+
+    monkeypatch.setattr(solve_module._ReachSweeps, "finish_stalled", counted)
+    rng = np.random.default_rng(7)
+    outcomes = []
+    for _ in range(8):
+        m = random_imdp(rng, 60, 3, 5)
+        count = len(finished)
+        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
+        assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+        if len(finished) > count:
+            outcomes.append(sol.converged)
+    assert outcomes and max(finished) <= solve_module._STALLED_SWEEPS
+    assert all(outcomes) if cheap else not any(outcomes)
