@@ -17,12 +17,12 @@ operator ``T`` (targets at 1), so by Knaster-Tarski every superharmonic ``U``
 (``T(U) <= U``) is an upper bound; no end-component analysis is needed to *check* one.
 Maximal reachability against a minimising adversary runs interval iteration
 (:mod:`planner.imdp.interval`); where that gives up (its bound from above stalled over
-most free states, or after its repairs), at most ``_STALLED_SWEEPS`` sweeps from below
-(with strategy iteration on the few states still moving) and the candidate below finish
-the solve, on at most ``GLOBAL_REPAIR_STATES`` free states once more with the values made
-exact; the bracket is left open where that fails (:meth:`_ReachSweeps.finish_stalled`).
-Otherwise, when a full sweep from below changes no value by the current goal
-(``tolerance`` at first), the candidate ``U = min(1, L + tolerance / 2)`` is checked by passes of
+most free states, or after its repairs) on more than ``GLOBAL_REPAIR_STATES`` free states,
+at most ``_STALLED_SWEEPS`` sweeps from below (with strategy iteration on the few states
+still moving) and the candidate below finish the solve, the bracket left open where it
+fails (:meth:`_ReachSweeps.finish_stalled`). Otherwise, when a full sweep from below
+changes no value by the current goal (``tolerance`` at first), the candidate ``U = min(1,
+L + tolerance / 2)`` is checked by passes of
 :func:`planner.imdp.kernels.upper_sweep` (optimistic value iteration, Hartmanns and
 Kaminski 2020): a pass that finds no state with ``T(U)(s) > U(s)`` (in floating point,
 up to ``ROUNDING``) accepts ``U``.
@@ -96,14 +96,15 @@ _MIN_GOAL = 1e-15
 """The smallest residual goal the sweeps from below are driven to."""
 
 _STALLED_SWEEPS = 4
-"""Full sweeps from below after interval iteration gave up (each followed by strategy
-iteration on the few states still moving). More work did not close such brackets where
-the free states are many: on the 100 x 100 benchmark grid (seeds 3-5, 7, 9-13: states of
-value near 1 that the controller can keep among free states for 1e11 steps and more) the
-sweeps, the strategy iteration on all 9,905 free states that made the values exact and
-the passes from above that followed took 2-20 s and closed none. On few free states that
-strategy iteration is cheap and can close the bracket (random 60-state models whose
-interval iteration is stopped before its repairs)."""
+"""Full sweeps from below after interval iteration gave up on more than
+``GLOBAL_REPAIR_STATES`` free states (each followed by strategy iteration on the few states
+still moving). More work did not close those brackets: on the 100 x 100 benchmark grid
+(seeds 3-5, 7, 9-14, 16, 19, 21, 24-28, 36, 38, 39 of 0-40: states of value near 1 that
+the controller can keep among free states for 1e11 steps and more) the sweeps, the
+strategy iteration on all 9,905 free states that made the values exact and the passes
+from above that followed took 2-20 s and closed none. On fewer free states that strategy
+iteration is cheap and the full sweeps still run (they close many small models whose
+interval iteration gave up)."""
 
 _FIRST_EVALUATION = 16
 """Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
@@ -238,20 +239,6 @@ class _ReachSweeps:
         if x is not None:
             self.v = np.maximum(self.v, x)
 
-    def _make_exact(self) -> bool:
-        """Strategy iteration on all free states with the certificate's fine switching
-        (once per solve); whether it changed the values."""
-        self.exacted = True
-        before = self.v
-        self._strategy_iteration(
-            self.free_rows,
-            self.fixed_val,
-            max_rounds=_CERTIFY_ROUNDS,
-            keep_sigma=True,
-            tol=max(self.alg.tolerance * _CERTIFY_SLACK, _CERTIFY_FLOOR),
-        )
-        return self.v is not before
-
     def candidate(self) -> tuple[np.ndarray | None, int]:
         return certify.optimistic_candidate(self.sweeper, self.v, self.alg.tolerance / 2)
 
@@ -263,7 +250,16 @@ class _ReachSweeps:
         self.upper_sweeps += passes
         if u is None and self.use_si and not self.exacted and self.n_free <= SI_MAX_STATES:
             # make the values from below exact (the least fixed point), then check
-            if self._make_exact():
+            self.exacted = True
+            before = self.v
+            self._strategy_iteration(
+                self.free_rows,
+                self.fixed_val,
+                max_rounds=_CERTIFY_ROUNDS,
+                keep_sigma=True,
+                tol=max(self.alg.tolerance * _CERTIFY_SLACK, _CERTIFY_FLOOR),
+            )
+            if self.v is not before:
                 u, passes = self.candidate()
                 self.upper_sweeps += passes
         if u is not None:
@@ -298,13 +294,23 @@ class _ReachSweeps:
             self._strategy_iteration(self.free_rows, self.fixed_val, keep_sigma=True)
 
     def finish_stalled(self) -> None:
-        """After interval iteration gave up (its bound from above stalled): at most
-        ``_STALLED_SWEEPS`` full sweeps from below, each followed by strategy iteration
-        on the states still moving when they are few, then the candidate ``L + tolerance
-        / 2``; where it fails and the free states are at most ``GLOBAL_REPAIR_STATES``
-        (cheap), once more after strategy iteration has made the values exact. Where
-        that fails too, the bound from above stays the interval iteration's (a sound
-        bound after every pass) and the bracket stays open."""
+        """After interval iteration gave up (its bound from above stalled). On at most
+        ``GLOBAL_REPAIR_STATES`` free states, where strategy iteration on all of them is
+        cheap (or without strategy iteration), the sweeps with their certificate attempts
+        and the passes from above (:meth:`sweeps`, :meth:`fallback`). On more, a bounded
+        finish: sweeps from below (:meth:`_settle`), then the candidate ``L + tolerance /
+        2`` once; where it fails the bound from above stays the interval iteration's (a
+        sound bound after every pass) and the bracket stays open."""
+        if not self.use_si or self.n_free <= GLOBAL_REPAIR_STATES:
+            self.sweeps()
+            self.fallback()
+            return
+        self._settle()
+        self._check_candidate()
+
+    def _settle(self) -> None:
+        """At most ``_STALLED_SWEEPS`` full sweeps from below, each followed by strategy
+        iteration on the states still moving when they are few."""
         for _ in range(_STALLED_SWEEPS):
             if self.it >= self.alg.max_iterations:
                 break
@@ -315,19 +321,13 @@ class _ReachSweeps:
                 self.alg.callback(self.it, self.residual)
             if not self._raise_moving(before):
                 break
-        if self._candidate_closes() or self.n_free > GLOBAL_REPAIR_STATES:
-            return
-        if self._make_exact():
-            self._candidate_closes()
 
-    def _candidate_closes(self) -> bool:
-        """The candidate ``L + tolerance / 2`` checked, kept in ``upper`` where it passes;
-        whether the bracket is closed."""
+    def _check_candidate(self) -> None:
+        """The candidate ``L + tolerance / 2`` checked, kept in ``upper`` where it passes."""
         u, passes = self.candidate()
         self.upper_sweeps += passes
         if u is not None:
             self.upper = np.minimum(self.upper, u)
-        return bool(np.max(self.upper - self.v) < self.alg.tolerance)
 
     def sweeps(self) -> None:
         """Sweeps from below with the certificate attempts and the creep checks."""
@@ -416,11 +416,7 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
         run.sweeps()
         run.fallback()
     elif not run.interval_iteration():
-        if run.use_si:
-            run.finish_stalled()
-        else:
-            run.sweeps()
-            run.fallback()
+        run.finish_stalled()
     result = run.result()
     if not alg.certified:
         return result, False

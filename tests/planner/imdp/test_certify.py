@@ -174,3 +174,39 @@ def test_interval_iteration_runs_in_a_forked_child():
     got = queue.get(timeout=60)
     proc.join(timeout=60)
     assert got == expected
+
+
+def test_a_repair_that_leaves_its_states_wide_is_not_repeated(monkeypatch):
+    # repairs that change nothing (no strategy found, no candidate certified): the stalled
+    # window after the first finds the same states wide, so interval iteration gives up
+    # after one repair instead of ``_II_REPAIRS``, and the bracket it leaves stays sound
+    import types
+
+    from tests.planner.imdp.reference import sticky_imdp
+
+    interval = importlib.import_module("planner.imdp.interval")
+    problems = [
+        Problem(
+            sticky_imdp(np.random.default_rng(seed), 200), Specification(ReachAvoid("goal", "bad"))
+        )
+        for seed in range(6)
+    ]
+    certified = [solve(p) for p in problems]  # before the repairs are disabled
+    nothing = types.SimpleNamespace(strategy_iteration=lambda *a, **k: (None, None, 1))
+    monkeypatch.setattr(interval, "strategy", nothing)
+    monkeypatch.setattr(interval.certify, "check_upper", lambda *a, **k: (False, 1))
+    repair = interval._IntervalIteration.repair
+    repairs: list[int] = []
+
+    def counted(self, wide):
+        repairs[-1] += 1
+        repair(self, wide)
+
+    monkeypatch.setattr(interval._IntervalIteration, "repair", counted)
+    for problem, good in zip(problems, certified, strict=True):
+        repairs.append(0)
+        sol = solve(problem)
+        assert good.converged
+        # both brackets hold the value: they overlap at every state
+        assert np.all(sol.lower <= good.upper) and np.all(good.lower <= sol.upper)
+    assert max(repairs) == 1 and interval._II_REPAIRS > 1

@@ -529,11 +529,11 @@ def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
 
 
 @pytest.mark.parametrize("cheap", [True, False])
-def test_a_stalled_interval_iteration_is_finished_in_a_few_sweeps(monkeypatch, cheap):
-    # interval iteration stopped at its first stalled window (no repairs): the solve ends
-    # after at most ``_STALLED_SWEEPS`` sweeps from below with a sound bracket; on few
-    # free states the values made exact close it, above ``GLOBAL_REPAIR_STATES`` it stays
-    # open where the candidate fails
+def test_a_stalled_interval_iteration_is_finished(monkeypatch, cheap):
+    # interval iteration stopped at its first stalled window (no repairs): on few free
+    # states the sweeps with their certificate attempts close the bracket; above
+    # ``GLOBAL_REPAIR_STATES`` the solve ends after at most ``_STALLED_SWEEPS`` sweeps from
+    # below, open where the candidate fails, and sound either way
     interval = importlib.import_module("planner.imdp.interval")
     monkeypatch.setattr(interval, "_II_REPAIRS", 0)
     monkeypatch.setattr(interval, "_II_WINDOW", 4)
@@ -558,5 +558,8 @@ def test_a_stalled_interval_iteration_is_finished_in_a_few_sweeps(monkeypatch, c
         assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
         if len(finished) > count:
             outcomes.append(sol.converged)
-    assert outcomes and max(finished) <= solve_module._STALLED_SWEEPS
-    assert all(outcomes) if cheap else not any(outcomes)
+    assert outcomes
+    if cheap:
+        assert all(outcomes)
+    else:
+        assert max(finished) <= solve_module._STALLED_SWEEPS and not any(outcomes)
