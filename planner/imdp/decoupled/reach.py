@@ -139,7 +139,7 @@ def rounding_widened(
     the allowance summed over the expected stay of the strategy of shortest stay among the
     rows within ``U - L`` of the best at ``U``, each with the adversary's distribution at
     ``U`` (:func:`planner.imdp.stay.chain_stay_allowance`, as
-    :func:`planner.imdp.reachability.rounding_widened` for interval MDPs); converged only
+    :func:`planner.imdp.widening.rounding_widened` for interval MDPs); converged only
     if the bracket still closes. Unconverged solutions are returned as they are."""
     if not sol.converged:
         return sol
