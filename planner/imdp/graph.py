@@ -18,7 +18,6 @@ sub-model); state masks have shape ``(n_states,)``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +33,7 @@ from planner.imdp.kernels import (
     prune_kernel,
     rows_staying_in,
 )
+from planner.imdp.kernels.exact import row_sum_signs
 from planner.imdp.model import IMDP, first_of_runs
 from planner.modes import Adversary
 
@@ -106,10 +106,6 @@ def _row_any(model: IMDP, entry_flags: np.ndarray) -> np.ndarray:
     return np.logical_or.reduceat(entry_flags, model.row_ptr[:-1])
 
 
-def _row_sum(model: IMDP, entry_values: np.ndarray) -> np.ndarray:
-    return np.add.reduceat(entry_values, model.row_ptr[:-1])
-
-
 def stays_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
     """Rows whose every possible successor (``upper > 0``) lies in ``mask``."""
     leaves = (model.upper > 0) & ~mask[model.successor]
@@ -141,17 +137,9 @@ def may_stay_in(model: IMDP, mask: np.ndarray) -> np.ndarray:
 
 
 def _sum_sign(model: IMDP, entry_values: np.ndarray) -> np.ndarray:
-    """Per row, the sign of the exact ``sum - 1`` of ``entry_values`` (values in
-    ``[0, 1]``): the float sum decides where rounding cannot tip it, ``math.fsum`` (exactly
-    rounded) the rest."""
-    total = _row_sum(model, entry_values)
-    sign = np.sign(total - 1.0)
-    k = np.diff(model.row_ptr)
-    near = np.flatnonzero(np.abs(total - 1.0) <= (2 * k + 2) * k * 2.0**-53)
-    for r in near:
-        part = entry_values[model.row_ptr[r] : model.row_ptr[r + 1]]
-        sign[r] = np.sign(math.fsum([*part.tolist(), -1.0]))
-    return sign
+    """Per row, the sign of the exact ``sum - 1`` of ``entry_values`` (values in ``[0,
+    1]``; :func:`planner.imdp.kernels.exact.row_sum_signs`)."""
+    return row_sum_signs(model.row_ptr, np.ascontiguousarray(entry_values, dtype=np.float64))
 
 
 def state_graph(model: IMDP, rows: np.ndarray | None = None) -> sp.csr_matrix:

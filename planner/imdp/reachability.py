@@ -239,15 +239,23 @@ class _ReachSweeps:
         if x is not None:
             self.v = np.maximum(self.v, x)
 
-    def candidate(self) -> tuple[np.ndarray | None, int]:
-        return certify.optimistic_candidate(self.sweeper, self.v, self.alg.tolerance / 2)
+    def candidate(self) -> np.ndarray | None:
+        """The candidate ``L + tolerance / 2`` if its checking passes (counted) pass."""
+        u, passes = certify.optimistic_candidate(self.sweeper, self.v, self.alg.tolerance / 2)
+        self.upper_sweeps += passes
+        return u
+
+    def keep_upper(self, u: np.ndarray | None) -> None:
+        """``upper`` lowered to a checked candidate ``u`` (the minimum of superharmonic
+        vectors is superharmonic); nothing for ``None``."""
+        if u is not None:
+            self.upper = u if self.upper is None else np.minimum(self.upper, u)
 
     def try_certify(self) -> bool:
         """After a full sweep below the goal: check the candidate ``L + tolerance / 2``
         (once making the values exact by strategy iteration first if it fails); whether
         to stop (certified, or out of tries)."""
-        u, passes = self.candidate()
-        self.upper_sweeps += passes
+        u = self.candidate()
         if u is None and self.use_si and not self.exacted and self.n_free <= SI_MAX_STATES:
             # make the values from below exact (the least fixed point), then check
             self.exacted = True
@@ -260,13 +268,10 @@ class _ReachSweeps:
                 tol=max(self.alg.tolerance * _CERTIFY_SLACK, _CERTIFY_FLOOR),
             )
             if self.v is not before:
-                u, passes = self.candidate()
-                self.upper_sweeps += passes
-        if u is not None:
-            # the minimum of superharmonic vectors is superharmonic
-            self.upper = u if self.upper is None else np.minimum(self.upper, u)
-            if np.max(self.upper - self.v) < self.alg.tolerance:
-                return True
+                u = self.candidate()
+        self.keep_upper(u)
+        if u is not None and np.max(self.upper - self.v) < self.alg.tolerance:
+            return True
         self.tries += 1
         if self.tries >= _OVI_TRIES:
             return True
@@ -306,7 +311,7 @@ class _ReachSweeps:
             self.fallback()
             return
         self._settle()
-        self._check_candidate()
+        self.keep_upper(self.candidate())
 
     def _settle(self) -> None:
         """At most ``_STALLED_SWEEPS`` full sweeps from below, each followed by strategy
@@ -321,13 +326,6 @@ class _ReachSweeps:
                 self.alg.callback(self.it, self.residual)
             if not self._raise_moving(before):
                 break
-
-    def _check_candidate(self) -> None:
-        """The candidate ``L + tolerance / 2`` checked, kept in ``upper`` where it passes."""
-        u, passes = self.candidate()
-        self.upper_sweeps += passes
-        if u is not None:
-            self.upper = np.minimum(self.upper, u)
 
     def sweeps(self) -> None:
         """Sweeps from below with the certificate attempts and the creep checks."""

@@ -105,6 +105,33 @@ def near_one(approx: float, k: int) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
+def row_sum_signs(row_ptr, values) -> np.ndarray:
+    """Per CSR row, the sign (-1, 0 or 1) of the exact ``sum - 1`` of its ``values`` (in
+    ``[0, 1]``): the float sum decides where rounding cannot tip it (:func:`near_one`), an
+    error-free expansion the rest."""
+    n = row_ptr.size - 1
+    out = np.empty(n, dtype=np.int64)
+    longest = 0
+    for r in range(n):
+        longest = max(longest, row_ptr[r + 1] - row_ptr[r])
+    terms = np.empty(longest + 1)
+    e = np.empty(longest + 1)
+    for r in range(n):
+        a, b = row_ptr[r], row_ptr[r + 1]
+        total = 0.0
+        for i in range(a, b):
+            total += values[i]
+        if not near_one(total, b - a):
+            out[r] = 1 if total > 1.0 else -1
+            continue
+        terms[0] = -1.0
+        for i in range(a, b):
+            terms[1 + i - a] = values[i]
+        out[r] = sum_sign(terms, b - a + 1, e)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def chain_exit_residual(indptr, indices, data, y, own, lost) -> np.ndarray:
     """``r_i = sum_{k: indices[k] != own[i]} data[k] (y[indices[k]] - y[own[i]]) - lost[i]
     y[own[i]]`` over the CSR rows ``i`` in double-double, rounded once: the residual of ``x

@@ -370,3 +370,26 @@ def test_patched_light_layout_equals_a_fresh_gather(seed):
         for a, b in zip(light, fresh, strict=True):
             np.testing.assert_array_equal(a, b)
     assert patched_any > 0 and refreshed > 0
+
+
+def test_row_sum_signs_match_exactly_rounded_sums():
+    # rows summing to 1 up to a few ulps, to exactly 1, and far from it: the sign of
+    # ``sum - 1`` is the exact one (math.fsum) on every row
+    import math
+
+    from planner.imdp.kernels.exact import row_sum_signs
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for k in rng.integers(1, 12, size=400):
+        p = rng.dirichlet(np.ones(k))
+        kind = rng.integers(3)
+        if kind == 1:
+            p = p * (1.0 + rng.choice([-1.0, 1.0]) * 2.0 ** -int(rng.integers(40, 60)))
+        elif kind == 2:
+            p = np.round(p, 3)
+        rows.append(np.clip(p, 0.0, 1.0))
+    ptr = np.concatenate(([0], np.cumsum([r.size for r in rows]))).astype(np.int64)
+    signs = row_sum_signs(ptr, np.concatenate(rows))
+    exact = [int(np.sign(math.fsum([*r.tolist(), -1.0]))) for r in rows]
+    assert signs.tolist() == exact and {-1, 0, 1} <= set(exact)
