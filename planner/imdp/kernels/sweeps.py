@@ -12,6 +12,8 @@ entries (:mod:`planner.imdp.kernels.rows`).
 
 from __future__ import annotations
 
+import copy
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -448,6 +450,15 @@ class ReachSweeper:
         if track:
             self._moved = int(moved)
         return float(dec), int(bad)
+
+    def frozen(self) -> ReachSweeper:
+        """A view of this layout for another thread: the same arrays but its own copy of
+        the critical successors of the sweeps from below, which :meth:`adversary_matrix`
+        and :meth:`row_values` start from (only those may be called on it), so that sweeps
+        here meanwhile change nothing it reads."""
+        view = copy.copy(self)
+        view.crit = self.crit.copy()
+        return view
 
     def adversary_matrix(self, u: np.ndarray) -> sp.csr_matrix:
         """The adversary's distribution of every free row at ``u`` (the rows in the order

@@ -210,3 +210,78 @@ def test_a_repair_that_leaves_its_states_wide_is_not_repeated(monkeypatch):
         # both brackets hold the value: they overlap at every state
         assert np.all(sol.lower <= good.upper) and np.all(good.lower <= sol.upper)
     assert max(repairs) == 1 and interval._II_REPAIRS > 1
+
+
+def _scripted_iteration(monkeypatch, n_free: int, windows: list[tuple[float, int, int]]):
+    """An interval iteration whose windows end as scripted: ``(width, wide, catching)``
+    each, the width constant within a window; returns it and its list of repairs."""
+    import types
+
+    interval = importlib.import_module("planner.imdp.interval")
+    ii = object.__new__(interval._IntervalIteration)
+    ii.alg = ValueIteration()
+    ii.sweeper = types.SimpleNamespace(states=np.arange(n_free))
+    ii.m = types.SimpleNamespace(n_states=n_free)
+    ii.v, ii.u = np.zeros(n_free), np.ones(n_free)
+    ii.it = ii.sweeps = ii.passes = ii.evaluations = ii.repairs = ii.stalls = 0
+    ii.global_repair, ii.repaired = False, np.inf
+    script = iter(windows)
+    repairs: list[int] = []
+    state = {"width": 1.0}
+
+    def scripted_round(self):
+        self.it += 1
+        self.sweeps += 2
+        if self.it % interval._II_WINDOW == 0:
+            state["width"], state["wide"], state["catching"] = next(script)
+        return state["width"]
+
+    def scripted_window(self, v0):
+        wide = np.zeros(n_free, dtype=bool)
+        wide[: state["wide"]] = True
+        return wide, state["catching"]
+
+    def repair(self, wide):
+        self.repairs += 1
+        repairs.append(self.it)
+
+    monkeypatch.setattr(interval._IntervalIteration, "round", scripted_round)
+    monkeypatch.setattr(interval._IntervalIteration, "_window", scripted_window)
+    monkeypatch.setattr(interval._IntervalIteration, "raise_moving", lambda self, before: None)
+    monkeypatch.setattr(interval._IntervalIteration, "repair", repair)
+    monkeypatch.setattr(interval._IntervalIteration, "width", lambda self: state["width"])
+    return ii, repairs, interval
+
+
+@pytest.mark.parametrize(
+    "progress",
+    ["none", "catching", "thinning", "narrowing", "few states"],
+)
+def test_a_stalled_window_without_progress_ends_interval_iteration(monkeypatch, progress):
+    # above GLOBAL_REPAIR_STATES free states, a stalled window with too many wide states
+    # for a local repair ends interval iteration at once when it shows no progress; any
+    # sign of progress (wide states that rose by their width, fewer wide states, a
+    # narrower bracket) counts a stall and goes on, as does a model with few free states
+    n = 4000 if progress != "few states" else 2000
+    many = n // 2  # above LOCAL_FRACTION
+    closing = [(1e-1, many, many), (1e-3, many, many)]  # the width halves: no stall
+    stalled = {
+        "none": (0.9e-3, many, 0),
+        "catching": (0.9e-3, many, many // 10),
+        "thinning": (0.9e-3, int(0.8 * many), 0),
+        "narrowing": (0.6e-3, many, 0),
+        "few states": (0.9e-3, many, 0),
+    }[progress]
+    flat = (stalled[0], stalled[1], 0)
+    ii, repairs, interval = _scripted_iteration(monkeypatch, n, closing + [stalled] + [flat] * 8)
+    if progress == "few states":
+        ii.global_repair = True  # its one repair of every free state is spent
+    assert not ii.run() and not repairs
+    window = interval._II_WINDOW
+    if progress in ("none",):
+        assert ii.it == 3 * window and ii.stalls == 0
+    elif progress == "few states":
+        assert ii.it == (3 + interval._II_STALLS) * window
+    else:
+        # the window with progress counts a stall; the flat one after it ends the iteration
+        assert ii.it == 4 * window and ii.stalls == 1

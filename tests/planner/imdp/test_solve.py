@@ -1,4 +1,5 @@
 import importlib
+import threading
 from fractions import Fraction
 
 import numpy as np
@@ -563,3 +564,45 @@ def test_a_stalled_interval_iteration_is_finished(monkeypatch, cheap):
         assert all(outcomes)
     else:
         assert max(finished) <= solve_module._STALLED_SWEEPS and not any(outcomes)
+
+
+def test_the_stalled_finish_certifies_its_bound_beside_the_sweeps(monkeypatch):
+    # above GLOBAL_REPAIR_STATES the bound from above that interval iteration gave up with
+    # is certified on a second thread while the sweeps settle the bound from below: the
+    # solutions are those of running the two in turn, and that certificate is the one
+    # reported unless the candidate lowered the bound meanwhile
+    interval = importlib.import_module("planner.imdp.interval")
+    monkeypatch.setattr(interval, "_II_REPAIRS", 0)
+    monkeypatch.setattr(interval, "_II_WINDOW", 4)
+    monkeypatch.setattr(solve_module, "GLOBAL_REPAIR_STATES", 0)
+    rng = np.random.default_rng(7)
+    problems = [
+        Problem(random_imdp(rng, 60, 3, 5), Specification(ReachAvoid("goal", "bad")))
+        for _ in range(8)
+    ]
+    certificate = solve_module._certificate
+    calls: list[list[str]] = []
+
+    def counted(*args):
+        calls[-1].append(threading.current_thread().name)
+        return certificate(*args)
+
+    monkeypatch.setattr(solve_module, "_certificate", counted)
+
+    def solved():
+        out = []
+        for problem in problems:
+            calls.append([])
+            out.append(solve(problem))
+        return out
+
+    at_once, where = solved(), calls[:]
+    # a stalled solve: certified on the worker only (the first finish's bound kept)
+    assert ["hopnav-upper_0"] in where
+    monkeypatch.setattr(solve_module, "concurrently", lambda back, fore, _: (back(), fore()))
+    calls.clear()
+    in_turn = solved()
+    assert [len(c) for c in where] == [len(c) for c in calls]
+    for a, b in zip(at_once, in_turn, strict=True):
+        assert np.array_equal(a.lower, b.lower) and np.array_equal(a.upper, b.upper)
+        assert a.converged == b.converged
