@@ -460,15 +460,18 @@ class ReachSweeper:
         view.crit = self.crit.copy()
         return view
 
-    def adversary_matrix(self, u: np.ndarray) -> sp.csr_matrix:
+    def adversary_matrix(self, u: np.ndarray, rows: np.ndarray | None = None) -> sp.csr_matrix:
         """The adversary's distribution of every free row at ``u`` (the rows in the order
-        of the ``free_rows`` given to the constructor, one per matrix row, over all model
+        of the ``free_rows`` given to the constructor, or those at the positions ``rows``
+        of it, one per matrix row, over all model
         states): :func:`planner.imdp.kernels.rows.row_distributions`, from the critical
         successors of the sweeps from below (copied, not moved): near the end of a solve
         the bracket is narrow and they stand at ``u`` too (on the random benchmark model
         all of them, against 72k of 517k rows stale in the lazy passes from above)."""
         back = np.empty_like(self._position)
         back[self._position] = np.arange(self._position.size)
+        if rows is not None:
+            back = back[rows]
         ptr, succ, prob = row_distributions(
             back,
             self.row_ptr,
@@ -480,7 +483,7 @@ class ReachSweeper:
             u,
             self.adversary_minimizes,
         )
-        return sp.csr_matrix((prob, succ, ptr), shape=(self.rows.size, self._model.n_states))
+        return sp.csr_matrix((prob, succ, ptr), shape=(back.size, self._model.n_states))
 
     def row_values(self, v: np.ndarray) -> np.ndarray:
         """The robust expectation of ``v`` for every free row, in the order of the
