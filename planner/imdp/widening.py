@@ -53,15 +53,10 @@ def rounding_widened(
 
     Negligible where stays are short (the 100 x 100 benchmark grid: about 1e-11).
 
-    ``sweeper``: the layout of ``free_rows`` that computed the bracket; its critical
-    successors give every row's robust value at ``upper``
-    (:meth:`planner.imdp.kernels.ReachSweeper.row_values`) and the adversary's
-    distributions of the rows that a chain may use, the near rows (or the chosen ones),
-    without sorting every row again
-    (:meth:`planner.imdp.kernels.ReachSweeper.adversary_matrix`: on the random
-    100k-state benchmark model 0.10-0.13 s instead of 0.24 s for all rows; only the
-    near rows on the benchmark grid: its widening 0.19 s to 0.15 s on seed 1, 0.21 s to
-    0.195 s on seed 5, under cProfile).
+    ``sweeper``: the layout that computed the bracket; from its critical successors come
+    every row's value at ``upper`` and the adversary's distributions of the near (or
+    chosen) rows only, none sorted again (``row_values``, ``adversary_matrix``; 0.19 s
+    to 0.15 s on the benchmark grid's seed 1 against the distributions of all rows).
     """
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)

@@ -452,22 +452,19 @@ class ReachSweeper:
         return float(dec), int(bad)
 
     def frozen(self) -> ReachSweeper:
-        """A view of this layout for another thread: the same arrays but its own copy of
-        the critical successors of the sweeps from below, which :meth:`adversary_matrix`
-        and :meth:`row_values` start from (only those may be called on it), so that sweeps
-        here meanwhile change nothing it reads."""
+        """A view for another thread, for :meth:`adversary_matrix` and :meth:`row_values`
+        only: its own copy of the critical successors, which sweeps here may move."""
         view = copy.copy(self)
         view.crit = self.crit.copy()
         return view
 
     def adversary_matrix(self, u: np.ndarray, rows: np.ndarray | None = None) -> sp.csr_matrix:
-        """The adversary's distribution of every free row at ``u`` (the rows in the order
-        of the ``free_rows`` given to the constructor, or those at the positions ``rows``
-        of it, one per matrix row, over all model
-        states): :func:`planner.imdp.kernels.rows.row_distributions`, from the critical
-        successors of the sweeps from below (copied, not moved): near the end of a solve
-        the bracket is narrow and they stand at ``u`` too (on the random benchmark model
-        all of them, against 72k of 517k rows stale in the lazy passes from above)."""
+        """The adversary's distribution at ``u`` of every free row in the order of the
+        constructor's ``free_rows`` (or at the positions ``rows`` of it), one per matrix
+        row: :func:`planner.imdp.kernels.rows.row_distributions`, from the critical
+        successors of the sweeps from below (copied): near the end of a solve the bracket
+        is narrow and they stand at ``u`` too (on the random benchmark model all of them,
+        against 72k of 517k rows stale in the lazy passes from above)."""
         back = np.empty_like(self._position)
         back[self._position] = np.arange(self._position.size)
         if rows is not None:
