@@ -191,25 +191,12 @@ def _others_of_vertex(c, n, idx, lower, upper, terms) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def _state_excess(
-    k,
-    states,
-    state_rows,
-    rows,
-    row_ptr,
-    succ,
-    lower,
-    upper,
-    u,
-    maximize,
-    minimizes,
-    idx,
-    keys,
-    work,
-) -> float:
+def _state_excess(k, layout, u, maximize, minimizes, idx, keys, work) -> float:
     """The bound of the exact excess ``T(U)(s) - U(s)`` at ``s = states[k]`` over its rows
     ``rows[state_rows[k]:state_rows[k + 1]]`` (any row when the controller maximises, its
-    best row when it minimises); ``-inf`` where ``U(s) >= 1``, which every row respects."""
+    best row when it minimises); ``-inf`` where ``U(s) >= 1``, which every row respects.
+    ``layout``: ``(states, state_rows, rows, row_ptr, succ, lower, upper)``."""
+    states, state_rows, rows, row_ptr, succ, lower, upper = layout
     s = states[k]
     if u[s] >= 1.0:
         return -np.inf
@@ -231,23 +218,9 @@ def state_excesses(
     (so that two ranges can be checked at once)."""
     idx, keys = scratch(row_ptr)
     work = np.empty(2 * idx.size + 8)
+    layout = (states, state_rows, rows, row_ptr, succ, lower, upper)
     for k in range(first, last):
-        out[k] = _state_excess(
-            k,
-            states,
-            state_rows,
-            rows,
-            row_ptr,
-            succ,
-            lower,
-            upper,
-            u,
-            maximize,
-            minimizes,
-            idx,
-            keys,
-            work,
-        )
+        out[k] = _state_excess(k, layout, u, maximize, minimizes, idx, keys, work)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -287,6 +260,7 @@ def raise_pass(
     idx, keys = scratch(row_ptr)
     work = np.empty(2 * idx.size + 8)
     use_known = known.size > 0
+    layout = (states, state_rows, rows, row_ptr, succ, lower, upper)
     raised = 0
     for k in range(states.size):
         s = states[k]
@@ -296,22 +270,7 @@ def raise_pass(
         if use_known and not stale[s]:
             worst = known[k]
         else:
-            worst = _state_excess(
-                k,
-                states,
-                state_rows,
-                rows,
-                row_ptr,
-                succ,
-                lower,
-                upper,
-                u,
-                maximize,
-                minimizes,
-                idx,
-                keys,
-                work,
-            )
+            worst = _state_excess(k, layout, u, maximize, minimizes, idx, keys, work)
         if worst > 0.0:
             raised += 1
             u[s] = min(1.0, np.nextafter(u[s] + worst * (1.0 + 2.0**-40), np.inf))
