@@ -272,7 +272,7 @@ class _IntervalIteration:
         alg, st = self.alg, self.sweeper.states
         tol = alg.tolerance
         checkpoint = np.inf
-        v0, wide_before, width_before = self.v.copy(), st.size, 1.0
+        v0, last_wide, last_width = self.v.copy(), st.size, 1.0
         while self.sweeps < alg.max_iterations:
             width = self.round()
             if width < tol:
@@ -287,8 +287,18 @@ class _IntervalIteration:
             if alg.strategy_iteration:
                 self.raise_moving(v0)
             wide, catching = self._window(v0)
-            n_wide, last_wide, last_width = int(wide.sum()), wide_before, width_before
-            v0, wide_before, width_before = self.v.copy(), n_wide, width
+            n_wide = int(wide.sum())
+            # no sign of progress over the window: at most a few wide states caught up from
+            # below, and neither their number nor the width fell much
+            stuck = (
+                catching <= _CATCHING * n_wide
+                and n_wide > (1.0 - _THINNING) * last_wide
+                and width > (1.0 - _NARROWING) * last_width
+            )
+            v0, last_wide, last_width = self.v.copy(), n_wide, width
+            if width <= 0.5 * checkpoint:
+                checkpoint = width
+                continue
             many = n_wide > LOCAL_FRACTION * st.size
             # not after a local repair that left most of its states wide: again it would not
             can_repair = (
@@ -296,9 +306,6 @@ class _IntervalIteration:
                 and self.repairs < _II_REPAIRS
                 and n_wide <= self.repaired / 2
             )
-            if width <= 0.5 * checkpoint:
-                checkpoint = width
-                continue
             if not can_repair or self.stalls >= _II_STALLS:
                 break
             if many:
@@ -310,12 +317,7 @@ class _IntervalIteration:
                     self.repair(wide)
                     checkpoint = self.width()
                     continue
-                if (
-                    st.size > GLOBAL_REPAIR_STATES
-                    and catching <= _CATCHING * n_wide
-                    and n_wide > (1.0 - _THINNING) * last_wide
-                    and width > (1.0 - _NARROWING) * last_width
-                ):
+                if st.size > GLOBAL_REPAIR_STATES and stuck:
                     # too many states for any repair, and no sign of progress
                     break
                 self.stalls += 1

@@ -90,12 +90,12 @@ def rounding_widened(
                 matrix, crs, pick, limit=limit, block_limit=limit if closing else 0.0
             )
         chosen = near[pick]
-        matrix = matrix[pick]
+        chain = matrix[pick]
     else:
         choice = strategy.strategy_rows(m, free_rows, q, seg, st, upper, False, False, 0.0)
         chosen = np.searchsorted(free_rows, np.sort(choice[st]))
-        matrix = sweeper.adversary_matrix(upper, chosen)
-    allowance = chain_stay_allowance(matrix, rs[chosen], upper, ROUNDING, SI_MAX_STATES, stay=stay)
+        chain = sweeper.adversary_matrix(upper, chosen)
+    allowance = chain_stay_allowance(chain, rs[chosen], upper, ROUNDING, SI_MAX_STATES, stay=stay)
     out = upper.copy()
     out[st] = np.minimum(1.0, upper[st] + allowance[st])
     return out
