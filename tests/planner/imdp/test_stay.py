@@ -171,7 +171,8 @@ def test_block_stay_bound_of_a_self_loop_is_tight_and_sound():
     p = 1.0 - 1e-3  # expected stay 1 / (1 - p) = 1000
     sub = sp.csr_matrix([[p]])
     bound = block_stay_bound(sub, limit=1e6)
-    assert 1000.0 <= bound <= 1100.0
+    # one state: the summed masses of the first block over what leaves in it are exact
+    assert 1000.0 <= bound <= 1000.0 * (1.0 + 1e-9)
     # a limit below any block's bound, or below the first block: no bound
     assert block_stay_bound(sub, limit=999.0) == np.inf
     assert block_stay_bound(sub, limit=10.0) == np.inf
