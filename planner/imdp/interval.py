@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner._util.threads import worker
+from planner._util.threads import concurrently, worker
 from planner.imdp import certify, strategy
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.model import IMDP
@@ -104,6 +104,10 @@ the 100 x 100 benchmark grid the repairs of seeds 0-2 took 11 / 9 / 12 strategy
 evaluations instead of 23 / 17 / 26, and the certified solve was 1.06-1.45x faster (seeds
 6 and 8: 1.13x and 1.20x; the seeds that take no repair are unchanged), with the same
 outcome and widths (A/B in one process)."""
+
+SPLIT_REPAIR_STATES = 500
+"""Wide states from which a repair's strategy iterations run on two threads, for two parts
+of whole independent components of the wide states."""
 
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
@@ -217,25 +221,59 @@ class _IntervalIteration:
 
     def repair(self, wide: np.ndarray) -> None:
         """Strategy iteration on the ``wide`` states from below (sound) and from above (a
-        candidate), the candidate kept if checking passes certify it."""
+        candidate), the candidate kept if checking passes certify it. From
+        ``SPLIT_REPAIR_STATES`` wide states on, the two strategy iterations run on two
+        threads for two parts of whole independent components
+        (:func:`planner.imdp.strategy.independent_parts`)."""
         self.repairs += 1
         rows = self._held_rows(wide)
-        x, sigma, k = strategy.strategy_iteration(
-            self.m, rows, self.v, np.where(wide, 0.0, self.v), True, _CANDIDATE_SLACK
-        )
-        self.evaluations += k
-        if x is not None:
-            self.v = np.maximum(self.v, x)
-        if sigma is not None and rows.size == self.sweeper.rows.size:
+        parts = [rows]
+        if np.count_nonzero(wide) >= SPLIT_REPAIR_STATES:
+            parts = strategy.independent_parts(self.m, rows, wide)
+        u, v0 = self.u, self.v
+        if len(parts) == 1:
+            found = [self._repair_part(rows, wide, v0, u)]
+        else:
+            other, first = concurrently(
+                lambda: self._repair_part(parts[1], wide, v0, u),
+                lambda: self._repair_part(parts[0], wide, v0, u),
+                "repair",
+            )
+            found = [first, other]
+        for x, _, k, _ in found:
+            self.evaluations += k
+            if x is not None:
+                self.v = np.maximum(self.v, x)
+        sigmas = [sigma for _, sigma, _, _ in found]
+        if all(s is not None for s in sigmas) and rows.size == self.sweeper.rows.size:
             # every free state: an exactly evaluated strategy that no state wants to leave
-            self.sigma = sigma
+            self.sigma = np.sort(np.concatenate(sigmas))
         # switching slack ~1e-15: a row left better than Y by more than tolerance / 4 times
         # its mass leaving B would fail the check
-        u, v = self.u, self.v
+        v, cand = self.v, None
+        for part, (_, _, _, y) in zip(parts, found, strict=True):
+            if y is not None:
+                cand = u.copy() if cand is None else cand
+                st = np.unique(self.m.row_state[part])
+                cand[st] = np.minimum(u[st], np.maximum(y[st], v[st]) + self.alg.tolerance / 4)
+        if cand is not None:
+            ok, k = certify.check_upper(self.sweeper, cand, _REPAIR_PASSES, raise_violations=True)
+            self.passes += k
+            if ok:
+                self.u = np.minimum(u, cand)
+                self.sweeper.moved_above(u, self.u)
+
+    def _repair_part(self, rows: np.ndarray, wide: np.ndarray, v: np.ndarray, u: np.ndarray):
+        """A repair's two strategy iterations on ``rows`` (every other state held at ``v``,
+        then ``u``; 0 at the other wide states, which these rows never reach): ``(x,
+        sigma, evaluations, y)``. Reads only its arguments and the model."""
+        x, sigma, k = strategy.strategy_iteration(
+            self.m, rows, v, np.where(wide, 0.0, v), True, _CANDIDATE_SLACK
+        )
         # from the strategy just found below: held at U instead of L, the best rows mostly
         # stay the best (seeds 0-2 of the benchmark grid: 15, 9, 16 evaluations from the
         # rows greedy for U)
-        y, _, k = strategy.strategy_iteration(
+        y, _, k_above = strategy.strategy_iteration(
             self.m,
             rows,
             u,
@@ -245,15 +283,7 @@ class _IntervalIteration:
             sound=False,
             start=sigma if START_ABOVE_FROM_BELOW else None,
         )
-        self.evaluations += k
-        if y is not None:
-            cand = u.copy()
-            cand[wide] = np.minimum(u[wide], np.maximum(y[wide], v[wide]) + self.alg.tolerance / 4)
-            ok, k = certify.check_upper(self.sweeper, cand, _REPAIR_PASSES, raise_violations=True)
-            self.passes += k
-            if ok:
-                self.u = np.minimum(u, cand)
-                self.sweeper.moved_above(u, self.u)
+        return x, sigma, k + k_above, y
 
     def _window(self, v0: np.ndarray) -> tuple[np.ndarray, int]:
         """At a window's end, from the bound from below ``v0`` at its start: the wide

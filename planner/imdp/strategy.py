@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
-from planner.imdp.model import IMDP, first_of_runs, run_ids
+from planner.imdp.model import IMDP, first_of_runs, row_entries, run_ids
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import DiscountedReward, ReachAvoid
 from planner.imdp.stay import surest_exit_start
@@ -97,6 +98,40 @@ def strategy_iteration(
         top = top[first_of_runs(seg_id[top])]  # one best row per state, in state order
         sigma = np.where(better, free_rows[top], sigma)
     return best, None, limit
+
+
+def independent_parts(m: IMDP, rows: np.ndarray, states: np.ndarray) -> list[np.ndarray]:
+    """``rows`` (sorted, the rows of the masked ``states``) in at most two parts of whole
+    weakly connected components of the graph the states form through the rows' entries
+    that may carry mass (``upper > 0``) to another of ``states``: held at values outside,
+    each part's chains never reach the other's states, so :func:`strategy_iteration` on
+    the parts finds what it finds on all of them (values, strategy; each part stops after
+    its own improvement rounds). Components in decreasing row count go to the first part
+    until it holds half of the rows, the rest to the second (the first part is at least
+    the largest component)."""
+    rs = m.row_state[rows]
+    members = rs[first_of_runs(rs)]
+    local = np.full(m.n_states, -1, dtype=np.int64)
+    local[members] = np.arange(members.size)
+    ent = row_entries(m, rows)
+    src = np.repeat(local[rs], m.row_ptr[rows + 1] - m.row_ptr[rows])
+    dst = m.successor[ent]
+    keep = states[dst] & (m.upper[ent] > 0.0)
+    graph_ = sp.csr_matrix(
+        (np.ones(int(keep.sum()), dtype=np.int8), (src[keep], local[dst[keep]])),
+        shape=(members.size, members.size),
+    )
+    n, label = connected_components(graph_, directed=True, connection="weak")
+    if n < 2:
+        return [rows]
+    row_label = label[local[rs]]
+    weight = np.bincount(row_label, minlength=n)
+    order = np.argsort(-weight, kind="stable")
+    before = np.cumsum(weight[order]) - weight[order]
+    second = np.zeros(n, dtype=bool)
+    second[order] = 2 * before >= rows.size
+    in_second = second[row_label]
+    return [rows[~in_second], rows[in_second]]
 
 
 def _surest_start(

@@ -71,6 +71,23 @@ def sticky_imdp(rng: np.random.Generator, n: int) -> IMDP:
     return IMDP(n, s, [0] * len(s), t, lo, up, labels=labels, propositions=("bad", "goal"))
 
 
+def side_by_side(a: IMDP, b: IMDP) -> IMDP:
+    """The disjoint union of two models (``b``'s states after ``a``'s): no row of one
+    reaches the other."""
+    sa, aa, ta, la, ua = a.coo()
+    sb, ab, tb, lb, ub = b.coo()
+    return IMDP(
+        a.n_states + b.n_states,
+        np.concatenate([sa, sb + a.n_states]),
+        np.concatenate([aa, ab]),
+        np.concatenate([ta, tb + a.n_states]),
+        np.concatenate([la, lb]),
+        np.concatenate([ua, ub]),
+        labels=list(a.labels) + list(b.labels),
+        propositions=a.propositions,
+    )
+
+
 def rows_of(model: IMDP) -> dict[tuple[int, int], list[tuple[int, float, float]]]:
     out: dict[tuple[int, int], list[tuple[int, float, float]]] = {}
     s, a, t, lo, up = model.coo()

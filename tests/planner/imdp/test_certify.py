@@ -212,6 +212,38 @@ def test_a_repair_that_leaves_its_states_wide_is_not_repeated(monkeypatch):
     assert max(repairs) == 1 and interval._II_REPAIRS > 1
 
 
+def test_a_repair_split_over_two_threads_finds_what_one_finds(monkeypatch):
+    # two sticky models side by side: their wide states are independent components, and
+    # the repair's strategy iterations on two parts give the solution of one on all
+    from tests.planner.imdp.reference import side_by_side, sticky_imdp
+
+    interval = importlib.import_module("planner.imdp.interval")
+    problems = []
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        model = side_by_side(sticky_imdp(rng, 200), sticky_imdp(rng, 200))
+        problems.append(Problem(model, Specification(ReachAvoid("goal", "bad"))))
+    monkeypatch.setattr(interval, "SPLIT_REPAIR_STATES", 10**9)
+    whole = [solve(p) for p in problems]
+    split = interval.strategy.independent_parts
+    parts: list[int] = []
+
+    def counted(*args):
+        out = split(*args)
+        parts.append(len(out))
+        return out
+
+    monkeypatch.setattr(interval.strategy, "independent_parts", counted)
+    monkeypatch.setattr(interval, "SPLIT_REPAIR_STATES", 1)
+    for problem, one in zip(problems, whole, strict=True):
+        two = solve(problem)
+        assert two.converged == one.converged
+        assert np.allclose(two.lower, one.lower, rtol=0.0, atol=1e-12)
+        assert np.allclose(two.upper, one.upper, rtol=0.0, atol=1e-12)
+        assert np.array_equal(two.strategy, one.strategy)
+    assert parts.count(2) >= 3
+
+
 def _scripted_iteration(monkeypatch, n_free: int, windows: list[tuple[float, int, int]]):
     """An interval iteration whose windows end as scripted: ``(width, wide, catching)``
     each, the width constant within a window; returns it and its list of repairs."""

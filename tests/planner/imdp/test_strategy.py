@@ -74,3 +74,35 @@ def test_strategy_iteration_from_a_given_start(seed):
         strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma[:-1])
     with pytest.raises(SpecificationError, match="one of the free rows per free state"):
         strategy_iteration(m, free_rows, fixed, fixed, True, 1e-10, start=sigma[::-1])
+
+
+def test_independent_parts_keep_whole_components():
+    from planner.imdp.model import row_entries
+    from planner.imdp.strategy import independent_parts
+    from tests.planner.imdp.reference import side_by_side, sticky_imdp
+
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        m = side_by_side(sticky_imdp(rng, 60), sticky_imdp(rng, 90))
+        states = rng.random(m.n_states) < 0.7
+        rows = np.flatnonzero(states[m.row_state])
+        parts = independent_parts(m, rows, states)
+        assert len(parts) == 2  # at least the two models' states are independent
+        assert np.array_equal(np.sort(np.concatenate(parts)), rows)
+        assert all(np.array_equal(p, np.sort(p)) for p in parts)
+        sizes = []
+        for p, q in ((0, 1), (1, 0)):
+            other = np.zeros(m.n_states, dtype=bool)
+            other[m.row_state[parts[q]]] = True
+            ent = row_entries(m, parts[p])
+            # no entry that may carry mass from one part's states to the other's
+            assert not np.any(other[m.successor[ent]] & (m.upper[ent] > 0.0))
+            sizes.append(parts[p].size)
+        # the first part is filled to half of the rows (components in decreasing size)
+        assert 2 * sizes[0] >= rows.size
+    # states that reach each other through their rows stay together
+    m = sticky_imdp(np.random.default_rng(9), 40)
+    states = np.zeros(m.n_states, dtype=bool)
+    states[[0, m.successor[m.row_ptr[0]]]] = True
+    rows = np.flatnonzero(states[m.row_state])
+    assert len(independent_parts(m, rows, states)) == 1
