@@ -41,7 +41,10 @@ and ``converged`` is ``False``).
 :func:`planner.imdp.certify.verify_upper` shows it superharmonic in exact arithmetic
 (``ReachResult.verified``); the floating-point checks above only steer. Where the raise
 would open a closed bracket (long stays: it sums an allowance along them), the bound as it
-is is checked first and kept if shown.
+is is checked first and kept if shown. A closed bracket is first checked raised uniformly
+by a share of the room left to the tolerance
+(:func:`planner.imdp.widening.uniformly_widened`), while the widening's search for short
+stays runs on a second thread and is stopped once that check has shown the raise.
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
 if few, are solved by strategy iteration with the others held; else, if the residuals
@@ -53,6 +56,7 @@ V_sigma)`` soundly.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -69,7 +73,7 @@ from planner.imdp.kernels import ReachSweeper, backward_distance
 from planner.imdp.model import IMDP
 from planner.imdp.problem import ValueIteration
 from planner.imdp.strategy import SI_MAX_STATES
-from planner.imdp.widening import rounding_widened
+from planner.imdp.widening import rounding_widened, uniformly_widened
 
 _OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
@@ -458,12 +462,36 @@ def _certificate(
     (:func:`planner.imdp.certify.verify_upper`; the bound it raised where shown, else the
     widened one). Where the widening would open a ``closed`` bracket (long stays), the
     bound as it is is checked first and kept if shown within the tolerance: the widening
-    is a raise that speeds the exact check, no proof."""
+    is a raise that speeds the exact check, no proof. A ``closed`` bracket is first checked
+    raised uniformly (:func:`planner.imdp.widening.uniformly_widened`) on this thread while
+    the widening searches on the ``"widen"`` worker; if shown within the tolerance that
+    bound is kept and the search stopped, else the widening goes on as above."""
     m, free_rows, alg = run.m, run.free_rows, run.alg
     sides = (run.maximize, run.adversary_minimizes)
-    widened = rounding_widened(
-        m, free_rows, lower, upper, run.adversary_minimizes, run.maximize, alg.tolerance, sweeper
-    )
+
+    def rounding(stop=None) -> np.ndarray | None:
+        return rounding_widened(
+            m, free_rows, lower, upper, *sides[::-1], alg.tolerance, sweeper, stop=stop
+        )
+
+    if not closed:
+        widened = rounding()
+    else:
+        # the uniform raise checked here while the widening searches on a second thread;
+        # the search stops once the check has shown the raise
+        shown_here = threading.Event()
+
+        def uniform() -> tuple[bool, np.ndarray] | None:
+            raised = uniformly_widened(lower, upper, sweeper.states, alg.tolerance)
+            verified, shown = certify.verify_upper(m, free_rows, raised, *sides)
+            if verified and np.max(shown - lower, initial=0.0) < alg.tolerance:
+                shown_here.set()
+                return True, shown
+            return None
+
+        widened, quick = concurrently(lambda: rounding(shown_here.is_set), uniform, "widen")
+        if quick is not None:
+            return quick
     if closed and np.max(widened - lower, initial=0.0) >= alg.tolerance:
         verified, shown = certify.verify_upper(m, free_rows, upper, *sides)
         if verified and np.max(shown - lower, initial=0.0) < alg.tolerance:

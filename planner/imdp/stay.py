@@ -13,6 +13,8 @@ are well within it (:func:`block_stay_bound`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -161,7 +163,12 @@ sparse LU of the chains of the 100 x 100 benchmark grid (0.06-0.09 s); their sta
 the widening's room after 128-256 steps (seeds 0-2 measured)."""
 
 
-def block_stay_bound(sub: sp.csr_matrix, limit: float, max_steps: int = _BLOCK_STEPS) -> float:
+def block_stay_bound(
+    sub: sp.csr_matrix,
+    limit: float,
+    max_steps: int = _BLOCK_STEPS,
+    stop: Callable[[], bool] | None = None,
+) -> float:
     """An upper bound of the expected stay from every state of the substochastic chain
     ``sub`` (rows of probabilities summing to at most 1; the missing mass leaves), found
     without a factorisation, or ``inf`` when none at most ``limit`` is found within
@@ -174,7 +181,8 @@ def block_stay_bound(sub: sp.csr_matrix, limit: float, max_steps: int = _BLOCK_S
     ``k / q``; exact for a single state). The products are checked at ``k = 32, 64,
     ..., max_steps``; every computed ``x_t`` and the sum are taken up by ``(w + 3) k
     eps`` relative for their rounding (``w`` the longest row: every product of
-    non-negative terms is off by at most ``w eps`` relative)."""
+    non-negative terms is off by at most ``w eps`` relative). ``stop``: asked at every
+    check; ``inf`` once it says so (the caller no longer needs the bound)."""
     n = sub.shape[0]
     if n == 0:
         return 0.0
@@ -189,6 +197,8 @@ def block_stay_bound(sub: sp.csr_matrix, limit: float, max_steps: int = _BLOCK_S
         x = sub @ x
         if k < _BLOCK_FIRST or k & (k - 1):
             continue
+        if stop is not None and stop():
+            return np.inf
         grow = 1.0 + (width + 3) * k * eps
         inside = float(np.max(x)) * grow
         if inside < 1.0:
@@ -205,6 +215,7 @@ def shortest_stay(
     rounds: int = 50,
     limit: float = 0.0,
     block_limit: float | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Per state one of the candidate rows (``matrix``: one distribution per candidate,
     over all states; ``row_states`` their states, sorted, at least one per state), chosen
@@ -219,7 +230,8 @@ def shortest_stay(
     the stays), and the expected stay of that choice per state (``(n_states,)``, ``1e300``
     where it never leaves, 0 off these states; where the block bound settled it, that
     bound, at most ``block_limit``, at every leaving state), or ``None`` when the last
-    round changed the choice without evaluating it."""
+    round changed the choice without evaluating it. ``stop``: asked before every round and
+    factorisation; once it says so, ``(choice, None)`` at once."""
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
@@ -232,6 +244,8 @@ def shortest_stay(
         return choice, full
 
     for _ in range(rounds):
+        if stop is not None and stop():
+            return choice, None
         sub = inner[choice]
         live = reaching(sub, leaving[choice] > 0.0)
         w = np.full(states.size, _NEVER)
@@ -239,10 +253,12 @@ def shortest_stay(
         if idx.size:
             chain = sub[idx][:, idx]
             most = limit if block_limit is None else block_limit
-            bound = block_stay_bound(chain.tocsr(), most)
+            bound = block_stay_bound(chain.tocsr(), most, stop=stop)
             if bound <= most:
                 w[idx] = bound
                 return evaluated(w)
+            if stop is not None and stop():
+                return choice, None
             w[idx] = chain_lu(chain).solve(np.ones(idx.size))
             if np.max(w[idx]) <= limit:
                 return evaluated(w)

@@ -510,23 +510,55 @@ def test_min_reach_of_slowly_mixing_chains_is_certified(sat):
         assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
 
 
-def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
-    # at a tolerance of 1e-12 the widening for the rounding of long stays can push a
-    # closed bracket over it (this chain: 1.012e-12); the solve then runs to a quarter of
-    # the tolerance and reports the sweeps of both runs
-    m = sticky_imdp(np.random.default_rng(3), 120)
-    spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
+def _counted_solves(monkeypatch) -> list[float]:
     once = solve_module._reach_once
-    calls = []
+    calls: list[float] = []
 
     def counted(run):
         calls.append(run.alg.tolerance)
         return once(run)
 
     monkeypatch.setattr(solve_module, "_reach_once", counted)
+    return calls
+
+
+def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
+    # at a tolerance of 1e-12 the widening for the rounding of long stays can push a
+    # closed bracket over it (this chain: 1.012e-12); the solve then runs to a quarter of
+    # the tolerance and reports the sweeps of both runs. The uniform raise tried first
+    # would be shown here: it stands in for one that fails (the bound from below)
+    m = sticky_imdp(np.random.default_rng(3), 120)
+    spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
+    monkeypatch.setattr(solve_module, "uniformly_widened", lambda lower, *args: lower.copy())
+    calls = _counted_solves(monkeypatch)
     sol = solve(Problem(m, spec), ValueIteration(1e-12))
     assert sol.converged and sol.error < 1e-12
     assert len(calls) == 2 and calls[1] == pytest.approx(calls[0] / 4)
+
+
+def test_the_uniform_raise_is_shown_and_the_widening_stops(monkeypatch):
+    # the same chain: the uniform raise (a share of the room left to the tolerance) needs
+    # no stays and is shown in exact arithmetic at once; the widening's search on the
+    # second thread is told to stop, and no second solve runs
+    m = sticky_imdp(np.random.default_rng(3), 120)
+    spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
+    calls = _counted_solves(monkeypatch)
+    widen = solve_module.rounding_widened
+    stops = []
+
+    def watched(*args, stop=None, **kw):
+        stops.append(stop)
+        return widen(*args, stop=stop, **kw)
+
+    monkeypatch.setattr(solve_module, "rounding_widened", watched)
+    sol = solve(Problem(m, spec), ValueIteration(1e-12))
+    assert sol.converged and sol.error < 1e-12 and len(calls) == 1
+    # the search ran beside the check and was told to stop (whether it had ended by then
+    # depends on the threads' timing)
+    assert len(stops) == 1 and stops[0] is not None and stops[0]()
+    tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+    ref = ref_reach(m, tgt, avd & ~tgt, pessimistic=True, maximize=False)
+    assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
 
 
 @pytest.mark.parametrize("cheap", [True, False])

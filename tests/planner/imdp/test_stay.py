@@ -165,6 +165,21 @@ def test_shortest_stay_reaches_the_enumerated_minimum(seed):
     )
 
 
+def test_a_stopped_stay_search_ends_at_once():
+    from planner.imdp.stay import block_stay_bound, shortest_stay
+
+    sub = sp.csr_matrix([[1.0 - 1e-3]])
+    assert block_stay_bound(sub, limit=1e6) < np.inf
+    assert block_stay_bound(sub, limit=1e6, stop=lambda: True) == np.inf
+    matrix = sp.csr_matrix(np.array([[0.5, 0.0], [0.9, 0.0]]))
+    rs = np.array([0, 0])
+    start = np.array([1])
+    choice, stay = shortest_stay(matrix, rs, start, limit=1.0, stop=lambda: True)
+    assert np.array_equal(choice, start) and stay is None
+    # not stopped, the search takes the row that leaves sooner
+    assert shortest_stay(matrix, rs, start)[0][0] == 0
+
+
 def test_block_stay_bound_of_a_self_loop_is_tight_and_sound():
     from planner.imdp.stay import block_stay_bound
 
