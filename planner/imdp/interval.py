@@ -268,7 +268,9 @@ class _IntervalIteration:
                 self.u = np.minimum(u, cand)
                 self.sweeper.moved_above(u, self.u)
 
-    def _repair_part(self, rows: np.ndarray, wide: np.ndarray, v: np.ndarray, u: np.ndarray):
+    def _repair_part(
+        self, rows: np.ndarray, wide: np.ndarray, v: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray | None, int, np.ndarray | None]:
         """A repair's two strategy iterations on ``rows`` (every other state held at ``v``,
         then ``u``; 0 at the other wide states, which these rows never reach): ``(x,
         sigma, evaluations, y)``. Reads only its arguments and the model."""

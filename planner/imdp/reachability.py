@@ -55,6 +55,7 @@ V_sigma)`` soundly.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -468,13 +469,12 @@ def _certificate(
     m, free_rows, alg = run.m, run.free_rows, run.alg
     sides = (run.maximize, run.adversary_minimizes)
 
-    def rounding(stop=None) -> np.ndarray | None:
+    def rounding(stop: Callable[[], bool] | None = None) -> np.ndarray | None:
         return rounding_widened(
             m, free_rows, lower, upper, *sides[::-1], alg.tolerance, sweeper, stop=stop
         )
 
     if not closed or not run.maximize or sweeper.states.size > SI_MAX_STATES:
-        # no search for short stays to save (see :func:`rounding_widened`)
         widened = rounding()
     else:
         # the uniform raise checked here while the widening searches on a second thread;
