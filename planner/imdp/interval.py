@@ -45,7 +45,7 @@ import numpy as np
 from planner._util.threads import concurrently, worker
 from planner.imdp import certify, strategy
 from planner.imdp.kernels import ReachSweeper
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.problem import ValueIteration
 
 FULL_EVERY = 4
@@ -259,7 +259,8 @@ class _IntervalIteration:
         for part, (_, _, _, y) in zip(parts, found, strict=True):
             if y is not None:
                 cand = u.copy() if cand is None else cand
-                st = np.unique(self.m.row_state[part])
+                rs = self.m.row_state[part]  # sorted: the part's rows are
+                st = rs[first_of_runs(rs)]
                 cand[st] = np.minimum(u[st], np.maximum(y[st], v[st]) + self.alg.tolerance / 4)
         if cand is not None:
             ok, k = certify.check_upper(self.sweeper, cand, _REPAIR_PASSES, raise_violations=True)

@@ -469,10 +469,10 @@ def _certificate(
     m, free_rows, alg = run.m, run.free_rows, run.alg
     sides = (run.maximize, run.adversary_minimizes)
 
+    widening = (m, free_rows, lower, upper, run.adversary_minimizes, run.maximize)
+
     def rounding(stop: Callable[[], bool] | None = None) -> np.ndarray | None:
-        return rounding_widened(
-            m, free_rows, lower, upper, *sides[::-1], alg.tolerance, sweeper, stop=stop
-        )
+        return rounding_widened(*widening, alg.tolerance, sweeper, stop=stop)
 
     if not closed or not run.maximize or sweeper.states.size > SI_MAX_STATES:
         widened = rounding()
