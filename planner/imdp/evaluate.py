@@ -59,7 +59,7 @@ def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     order, ptr = counting_order(adj.indices[edge].astype(np.int64), n)
     inc = src[order]  # each state is its own row, so an edge's row and state coincide
     dist = backward_distance(
-        np.asarray(seeds, dtype=bool), np.ones(n, bool), ptr, inc, inc, np.ones(order.size)
+        np.asarray(seeds, dtype=bool), np.ones(n, bool), ptr, inc, inc, np.ones(order.size), n
     )
     return np.isfinite(dist)
 

@@ -31,6 +31,7 @@ from planner.imdp.kernels import (
     forward_reach,
     maximal_end_components_kernel,
     prune_kernel,
+    reach_limit,
     rows_staying_in,
 )
 from planner.imdp.kernels.exact import row_sum_signs
@@ -168,7 +169,8 @@ def possible_reach(
     """
     target, rows = reach_rows(model, target, avoid, rows)
     ptr, inc_row, inc_state, _, inc_upper = model.reverse_index()
-    dist = backward_distance(target, rows, ptr, inc_row, inc_state, inc_upper)
+    limit = reach_limit(target, model.row_state, rows)
+    dist = backward_distance(target, rows, ptr, inc_row, inc_state, inc_upper, limit)
     return dist < np.inf
 
 

@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from planner.imdp import strategy
 from planner.imdp.kernels import ReachSweeper
-from planner.imdp.kernels.sweeps import ROUNDING
+from planner.imdp.kernels.upper import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.stay import (
     chain_stay_allowance,

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.sweeps import ROUNDING
+from planner.imdp.kernels.upper import ROUNDING
 
 
 @numba.njit(cache=True, nogil=True)

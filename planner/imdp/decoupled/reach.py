@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from planner.imdp.decoupled import operator
 from planner.imdp.decoupled.model import DecoupledIMDP
 from planner.imdp.evaluate import chain_reach
-from planner.imdp.kernels.sweeps import ROUNDING
+from planner.imdp.kernels.upper import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.solve import Solution, ValueIteration
 from planner.imdp.stay import (

@@ -1,8 +1,9 @@
 """Compiled (numba) kernels for the sequential parts of robust value iteration and of the
 graph analyses: the robust expectation of a row (:mod:`.rows`), Gauss-Seidel sweeps and
-their layout (:mod:`.sweeps`), end components (:mod:`.components`), graph searches
-(:mod:`.search`), double-double residuals of strategy evaluation (:mod:`.exact`) and the
-superharmonicity check in exact arithmetic (:mod:`.verify`)."""
+their layout (:mod:`.sweeps`), passes from above (:mod:`.upper`), end components
+(:mod:`.components`), graph searches (:mod:`.search`), double-double residuals of
+strategy evaluation (:mod:`.exact`) and the superharmonicity check in exact arithmetic
+(:mod:`.verify`)."""
 
 from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
 from planner.imdp.kernels.exact import chain_exit_residual
@@ -14,11 +15,14 @@ from planner.imdp.kernels.search import (
     counting_order,
     forward_reach,
     incoming_index,
+    layers,
     prune_kernel,
+    reach_limit,
     rows_staying_in,
     surest_exit_choice,
 )
-from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep, upper_sweep
+from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep
+from planner.imdp.kernels.upper import upper_sweep
 
 __all__ = [
     "ReachSweeper",
@@ -33,8 +37,10 @@ __all__ = [
     "gather_rows",
     "gauss_seidel_sweep",
     "incoming_index",
+    "layers",
     "maximal_end_components_kernel",
     "prune_kernel",
+    "reach_limit",
     "rows_staying_in",
     "surest_exit_choice",
     "upper_sweep",

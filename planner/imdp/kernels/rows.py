@@ -194,6 +194,20 @@ def row_distributions(sel, row_ptr, remaining, succ, lower, gap, crit, v, advers
 
 
 @numba.njit(cache=True, nogil=True)
+def fill_layout(first, last, sel, model_ptr, successor, lower, upper, ptr, succ, low, gap):
+    """The entries of the model rows ``sel[first:last]`` into a layout with row pointers
+    ``ptr``, in place: successor, lower bound and gap ``upper - lower`` (the sweeps'
+    layout, gathered in one pass without an index of the entries)."""
+    for i in range(first, last):
+        r = sel[i]
+        off = ptr[i] - model_ptr[r]
+        for e in range(model_ptr[r], model_ptr[r + 1]):
+            succ[e + off] = successor[e]
+            low[e + off] = lower[e]
+            gap[e + off] = upper[e] - lower[e]
+
+
+@numba.njit(cache=True, nogil=True)
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
     new_ptr = np.zeros(sel.size + 1, dtype=np.int64)

@@ -11,7 +11,7 @@ import numpy as np
 from planner._util.threads import in_halves
 from planner.imdp.kernels.exact import near_one, sum_sign
 from planner.imdp.kernels.rows import longest_row
-from planner.imdp.model import entries_of_rows
+from planner.imdp.model import IMDP, entries_of_rows
 
 
 @numba.njit(cache=True, nogil=True)
@@ -209,11 +209,15 @@ def counting_order(keys, n_keys):
 
 
 @numba.njit(cache=True, nogil=True)
-def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper):
+def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper, limit):
     """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
     entries of the rows in ``row_mask`` (``inf`` where no path). ``inc_state``: the state
     of each incoming entry's row (:meth:`planner.imdp.model.IMDP.reverse_index`), read
-    in order, so that an entry from a state already reached costs no lookup of its row."""
+    in order, so that an entry from a state already reached costs no lookup of its row.
+    ``limit``: how many states can be reached at most (the sources and the states with a
+    row in ``row_mask``, :func:`reach_limit`); the search ends once that many are (on the
+    random 100k-state benchmark model after a fraction of the 7.2M entries it would scan
+    to empty its queue)."""
     dist = np.full(sources.size, np.inf)
     queue = np.empty(sources.size, dtype=np.int64)
     tail = 0
@@ -223,7 +227,7 @@ def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper)
             queue[tail] = s
             tail += 1
     head = 0
-    while head < tail:
+    while head < tail < limit:
         t = queue[head]
         head += 1
         d = dist[t] + 1.0
@@ -235,6 +239,25 @@ def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper)
             queue[tail] = s
             tail += 1
     return dist
+
+
+def reach_limit(sources: np.ndarray, row_state: np.ndarray, rows: np.ndarray) -> int:
+    """How many states a backward search from ``sources`` over ``rows`` (indices or a
+    mask) can reach at most: the sources and the states with one of the rows."""
+    can = np.array(sources, dtype=bool, copy=True)
+    can[row_state[rows]] = True
+    return int(np.count_nonzero(can))
+
+
+def layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
+    state to ``sources``; ``inf`` where there is no path."""
+    row_mask = np.zeros(m.n_rows, dtype=bool)
+    row_mask[free_rows] = True
+    ptr, inc_row, inc_state, _, inc_upper = m.reverse_index()
+    src = np.asarray(sources, dtype=bool)
+    limit = reach_limit(src, m.row_state, free_rows)
+    return backward_distance(src, row_mask, ptr, inc_row, inc_state, inc_upper, limit)
 
 
 @numba.njit(cache=True, nogil=True)

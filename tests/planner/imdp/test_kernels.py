@@ -182,7 +182,7 @@ def test_layers_are_breadth_first_hop_counts_over_the_free_rows(seed):
     import scipy.sparse as sp
     from scipy.sparse.csgraph import shortest_path
 
-    from planner.imdp.reachability import layers
+    from planner.imdp.kernels import layers
 
     rng = np.random.default_rng(seed)
     m = random_imdp(rng, n_states=80, max_succ=4, zero_lower=bool(seed % 2))
@@ -393,3 +393,40 @@ def test_row_sum_signs_match_exactly_rounded_sums():
     signs = row_sum_signs(ptr, np.concatenate(rows))
     exact = [int(np.sign(math.fsum([*r.tolist(), -1.0]))) for r in rows]
     assert signs.tolist() == exact and {-1, 0, 1} <= set(exact)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch):
+    # forced on a small model: the later half reads the earlier half's values from before
+    # the sweep, whatever the threads' timing; the layout is the model's entries
+    from planner.imdp.kernels import gauss_seidel_sweep
+
+    monkeypatch.setattr(sweeps, "HALVES_SWEEP_ENTRIES", 1)
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=120, n_actions=4, max_succ=6, zero_lower=bool(seed % 2))
+    sw = _sweeper(m, True)
+    cut = sw._cut
+    assert 0 < cut < sw.states.size
+    ent = np.concatenate([np.arange(m.row_ptr[r], m.row_ptr[r + 1]) for r in sw.rows])
+    np.testing.assert_array_equal(sw.succ, m.successor[ent])
+    np.testing.assert_array_equal(sw.lower, m.lower[ent])
+    np.testing.assert_array_equal(sw.gap, m.upper[ent] - m.lower[ent])
+    v = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    monkeypatch.setattr(sweeps, "HALVES_SWEEP_ENTRIES", 10**12)
+    ref = _sweeper(m, True)
+    assert ref._cut == 0
+    for _ in range(6):
+        want = v.copy()
+        later = v.copy()
+        layout = (ref.row_ptr, ref.remaining, ref.succ, ref.lower, ref.gap, ref.crit)
+        sides = (True, True, True, np.empty(0))
+        st, rows, best = ref.states, ref.state_rows, ref.best_row
+        r0 = gauss_seidel_sweep(st[:cut], rows[: cut + 1], *layout, want, best[:cut], *sides)
+        r1 = gauss_seidel_sweep(st[cut:], rows[cut:], *layout, later, best[cut:], *sides)
+        want[st[cut:]] = later[st[cut:]]
+        got = v.copy()
+        assert sw.sweep(got) == max(r0, r1)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(sw.best_row, ref.best_row)
+        v = got
+    assert v.max() > 0.0
