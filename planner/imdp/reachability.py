@@ -47,7 +47,7 @@ search for short stays, which stops once it is shown (:func:`_certificate`).
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
 if few, are solved by strategy iteration with the others held; else, if the residuals
-extrapolate to more than ``max(4 k, 1000)`` further sweeps, strategy iteration runs on all
+(below 1e-3) extrapolate to more than ``max(4 k, 1000)`` further sweeps, it runs on all
 free states (:mod:`planner.imdp.strategy`). Its values are a strategy's values, hence at
 most the least fixed point and ``<= T(V)``, so the sweeps continue from ``max(V,
 V_sigma)`` soundly.

@@ -42,8 +42,8 @@ Where mass leaks slowly out of near-end-components the sweeps from below creep (
 residual can stay near ``1e-8`` per sweep while the values are still far from the fixed
 point, so the residual rule alone would stop early or after millions of sweeps). For
 maximal reachability (at most 20,000 free states, as its LU solves can fill in) the
-sweeps therefore check, after 16, 32, 64, ... sweeps, whether the
-residuals extrapolate to more than ``max(4 k, 1000)`` further sweeps, and if so run robust
+sweeps therefore check, after 16, 32, 64, ... sweeps, whether the residuals (once below
+1e-3) extrapolate to more than ``max(4 k, 1000)`` further sweeps, and if so run robust
 strategy iteration: the strategy is evaluated exactly against the adversary's best
 response (:mod:`planner.imdp.evaluate`: sparse solves, adversary policy iteration) and
 improved only where a row is strictly better. Its values are a strategy's values, hence at
