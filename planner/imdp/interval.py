@@ -16,7 +16,7 @@ held at ``L`` (sound, as in :mod:`planner.imdp.reachability`).
 
 When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a long
 time among states of nearly equal value: ``U`` creeps down at the rate of the circulation's
-leak), the states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration
+leak; a window ends early where the width near the tolerance stays flat, ``_FLAT``), the states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration
 with the others held, when they are at most ``LOCAL_FRACTION`` of the free states (when
 more are wide, the first such stall takes all free states as ``B`` if they are at most
 ``GLOBAL_REPAIR_STATES``; ``_II_STALLS`` further stalls end it): from below with ``L``
@@ -116,6 +116,17 @@ components, seed 2: 943, 256, 177, 33 states) seed 2's repair takes 0.30 s inste
 
 _II_WINDOW = 16
 """Rounds of interval iteration over which the bracket must at least halve."""
+
+_FLAT_ROUNDS = 4
+_FLAT = 0.99
+_FLAT_NEAR = 100.0
+"""A window ends early, after any ``_FLAT_ROUNDS`` rounds, when the width, within
+``_FLAT_NEAR`` times the tolerance, fell by less than ``1 - _FLAT`` over them (at that
+pace halving it takes hundreds of rounds). On the 100 x 100 benchmark grid (seeds 0-80)
+the same certificates and closed brackets, 37 layouts 0.05-0.5 s faster and none slower
+(seed 0: its width stays at 4.73e-8 from round 96 and the repair came at round 112);
+checked every 4 rounds at any width, the flat first rounds (width 1) ended windows before
+the bound from below had risen, and 40 brackets stayed open."""
 
 _II_REPAIRS = 3
 """Strategy-iteration repairs of a stalled interval iteration."""
@@ -309,7 +320,7 @@ class _IntervalIteration:
         """Rounds until the bracket closes (``True``) or stalls for good (``False``)."""
         alg, st = self.alg, self.sweeper.states
         tol = alg.tolerance
-        checkpoint = np.inf
+        checkpoint = flat_from = np.inf
         v0, last_wide, last_width = self.v.copy(), st.size, 1.0
         while self.sweeps < alg.max_iterations:
             width = self.round()
@@ -320,7 +331,11 @@ class _IntervalIteration:
                 if alg.callback is not None:
                     alg.callback(self.sweeps, self.residual)
                 return True
-            if self.it % _II_WINDOW:
+            flat = False
+            if self.it % _FLAT_ROUNDS == 0:
+                flat = _FLAT * flat_from < width < _FLAT_NEAR * tol
+                flat_from = width
+            if self.it % _II_WINDOW and not flat:
                 continue
             if alg.strategy_iteration:
                 self.raise_moving(v0)

@@ -285,6 +285,16 @@ def _scripted_iteration(monkeypatch, n_free: int, windows: list[tuple[float, int
     return ii, repairs, interval
 
 
+@pytest.mark.parametrize("width, first_repair", [(3e-7, 20), (1e-3, 32)])
+def test_a_flat_width_near_the_tolerance_ends_its_window_early(monkeypatch, width, first_repair):
+    # the width stays put from round 16 on: within 100 times the tolerance (1e-8) the
+    # window ends after 4 flat rounds and the wide states are repaired then; farther
+    # from it only at the window's end
+    ii, repairs, _ = _scripted_iteration(monkeypatch, 1000, [(width, 10, 0)] * 8)
+    assert not ii.run()
+    assert repairs[0] == first_repair
+
+
 @pytest.mark.parametrize(
     "progress",
     ["none", "catching", "thinning", "narrowing", "few states"],
