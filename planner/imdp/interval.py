@@ -16,8 +16,9 @@ held at ``L`` (sound, as in :mod:`planner.imdp.reachability`).
 
 When the width has not halved over ``_II_WINDOW`` rounds (mass that circulates for a long
 time among states of nearly equal value: ``U`` creeps down at the rate of the circulation's
-leak; a window ends early where the width near the tolerance stays flat, ``_FLAT``), the states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration
-with the others held, when they are at most ``LOCAL_FRACTION`` of the free states (when
+leak; a window ends early where the width near the tolerance stays flat, ``_FLAT``), the
+states ``B`` still wider than ``tolerance / 2`` are solved by strategy iteration with the
+others held, when they are at most ``LOCAL_FRACTION`` of the free states (when
 more are wide, the first such stall takes all free states as ``B`` if they are at most
 ``GLOBAL_REPAIR_STATES``; ``_II_STALLS`` further stalls end it): from below with ``L``
 outside (a sound lower bound), and from above with ``U`` outside, *unlowered*, from the
