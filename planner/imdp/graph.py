@@ -29,6 +29,7 @@ from planner.imdp.kernels import (
     attractor_of_rows,
     backward_distance,
     forward_reach,
+    leave_states,
     maximal_end_components_kernel,
     prune_kernel,
     reach_limit,
@@ -239,13 +240,10 @@ def _attractor(
 
 COMPACT_FRACTION = 32
 """A robust attractor with at most ``1 / COMPACT_FRACTION`` of the rows as candidates runs
-on those rows alone (gathering them and their own reverse index costs more than walking
-the model's index skips beyond that: on the 100 x 100 benchmark grid's product, 26,514 and
-20,996 of 236,403 rows took 17.7 and 12.5 ms on their own against 11.6 and 5.5 ms on the
-model's index, and on the random 100k-state model 64,611 of 800,000 rows 67 ms against
-48 ms, while 19,802 of them took 15.6 ms against 32 ms; with 32 instead of 8 the
-uncertified solves of both took 0.43-0.45 s and 0.52 s instead of 0.47-0.51 s and
-0.54-0.55 s, A/B in one process)."""
+on those rows alone (their own reverse index costs more than the model's saves beyond
+that: 26,514 and 20,996 of the 236,403 rows of the benchmark grid's product took 17.7 and
+12.5 ms alone, 11.6 and 5.5 ms on the model's index; 64,611 of the random model's 800,000
+67 ms against 48 ms, 19,802 of them 15.6 ms against 32 ms)."""
 
 
 def attractor_arrays(model: IMDP) -> tuple[np.ndarray, ...]:
@@ -280,16 +278,22 @@ def robust_almost_sure_reach(
     u = np.ones(n, dtype=bool) if region is None else np.asarray(region, dtype=bool).copy()
     if avoid is not None:
         u &= ~np.asarray(avoid, dtype=bool) | target
+    arrays = (model.row_state, model.row_ptr, model.successor, model.upper)
+    inc_ptr, inc_row, _, _, inc_upper = model.reverse_index()
+    # rows of U (targets excluded) that cannot leave U; where U loses fewer states than it
+    # keeps, only the rows at and into those states change
+    cand = rows_staying_in(u, rows, *arrays, target)
     while True:
-        # rows of U (targets excluded) that cannot leave U
-        cand = rows_staying_in(
-            u, rows, model.row_state, model.row_ptr, model.successor, model.upper, target
-        )
         x, choice = _attractor(model, target & u, cand)
         x &= u
         if np.array_equal(x, u):
             choice[~u] = -1
             return u, choice
+        gone = np.flatnonzero(u & ~x)
+        if gone.size <= np.count_nonzero(x):
+            leave_states(gone, cand, model.state_ptr, inc_ptr, inc_row, inc_upper)
+        else:
+            cand = rows_staying_in(x, rows, *arrays, target)
         u = x
 
 

@@ -430,3 +430,23 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
         np.testing.assert_array_equal(sw.best_row, ref.best_row)
         v = got
     assert v.max() > 0.0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_leaving_states_updates_the_staying_rows_as_computing_them_anew(seed):
+    from planner.imdp.kernels import leave_states, rows_staying_in
+
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=150, max_succ=5, zero_lower=bool(seed % 2))
+    rows = rng.random(m.n_rows) < 0.8
+    exclude = rng.random(m.n_states) < 0.05
+    u = rng.random(m.n_states) < 0.9
+    arrays = (m.row_state, m.row_ptr, m.successor, m.upper)
+    stay = rows_staying_in(u, rows, *arrays, exclude)
+    inc_ptr, inc_row, _, _, inc_upper = m.reverse_index()
+    for _ in range(5):
+        gone = u & (rng.random(m.n_states) < 0.1)
+        leave_states(np.flatnonzero(gone), stay, m.state_ptr, inc_ptr, inc_row, inc_upper)
+        u = u & ~gone
+        np.testing.assert_array_equal(stay, rows_staying_in(u, rows, *arrays, exclude))
+    assert stay.any()
