@@ -27,12 +27,11 @@ from planner.errors import SpecificationError
 from planner.imdp.kernels import (
     attractor,
     attractor_of_rows,
-    backward_distance,
     forward_reach,
+    layers,
     leave_states,
     maximal_end_components_kernel,
     prune_kernel,
-    reach_limit,
     rows_staying_in,
 )
 from planner.imdp.kernels.exact import row_sum_signs
@@ -169,10 +168,7 @@ def possible_reach(
     Backward breadth-first search over ``upper > 0`` edges (one pass, ``O(entries)``).
     """
     target, rows = reach_rows(model, target, avoid, rows)
-    ptr, inc_row, inc_state, _, inc_upper = model.reverse_index()
-    limit = reach_limit(target, model.row_state, rows)
-    dist = backward_distance(target, rows, ptr, inc_row, inc_state, inc_upper, limit)
-    return dist < np.inf
+    return layers(model, rows, target) < np.inf
 
 
 def recurrence_candidates(

@@ -124,7 +124,7 @@ are a front spreading from the targets, whose residuals do not decay geometrical
 100 x 100 benchmark grid they stay at 0.1-0.3 for the first 60 sweeps, and the
 extrapolation at sweep 33 of seeds 0, 3, 5, 7-11 called them creeping once the sweeps ran
 in two halves; the strategy iteration on all 9,908 free states it started took 5.6-9.4
-s, against 0.5-0.8 s for the sweeps to the tolerance). A creep with a larger residual leaks
+s, against 0.4-1.5 s for the sweeps to the tolerance). A creep with a larger residual leaks
 at least ``_CREEP_RESIDUAL`` per sweep of its distance to the fixed point."""
 
 

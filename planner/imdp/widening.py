@@ -73,7 +73,7 @@ def rounding_widened(
     # of the rows, each with the adversary's distribution at ``upper``
     q = sweeper.row_values(upper)
     if maximize:
-        found = _short_stay_chain(m, free_rows, lower, upper, q, tolerance, sweeper, stop)
+        found = _short_stay_chain(m, free_rows, rs, seg, lower, upper, q, tolerance, sweeper, stop)
         if found is None:
             return None
         chosen, chain, stay = found
@@ -92,6 +92,8 @@ def rounding_widened(
 def _short_stay_chain(
     m: IMDP,
     free_rows: np.ndarray,
+    rs: np.ndarray,
+    seg: np.ndarray,
     lower: np.ndarray,
     upper: np.ndarray,
     q: np.ndarray,
@@ -101,9 +103,8 @@ def _short_stay_chain(
 ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray | None] | None:
     """The maximising side of :func:`rounding_widened`: ``(chosen, chain, stay)``, the
     positions in ``free_rows`` of the rows of short stay, their distributions and the
-    expected stays if a policy iteration found them; ``None`` once ``stop`` says so."""
-    rs = m.row_state[free_rows]
-    seg = first_of_runs(rs)
+    expected stays if a policy iteration found them; ``None`` once ``stop`` says so
+    (``rs``: the rows' states, ``seg``: where each state's run of them starts)."""
     st = rs[seg]
     slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING
     near = np.flatnonzero(q >= np.maximum.reduceat(q, seg)[run_ids(rs)] - slack)

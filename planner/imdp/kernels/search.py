@@ -264,10 +264,13 @@ def reach_limit(sources: np.ndarray, row_state: np.ndarray, rows: np.ndarray) ->
 
 
 def layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``) from each
-    state to ``sources``; ``inf`` where there is no path."""
-    row_mask = np.zeros(m.n_rows, dtype=bool)
-    row_mask[free_rows] = True
+    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``, indices
+    or a row mask) from each state to ``sources``; ``inf`` where there is no path."""
+    if free_rows.dtype == np.bool_:
+        row_mask = free_rows
+    else:
+        row_mask = np.zeros(m.n_rows, dtype=bool)
+        row_mask[free_rows] = True
     ptr, inc_row, inc_state, _, inc_upper = m.reverse_index()
     src = np.asarray(sources, dtype=bool)
     limit = reach_limit(src, m.row_state, free_rows)

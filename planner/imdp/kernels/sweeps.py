@@ -222,8 +222,8 @@ class ReachSweeper:
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
         the best rows of the last full sweep."""
         if full or self._light is None:
-            residual = self._full_sweep(v, self._no_cache if bound is None else bound)
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
+            residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
             if (
                 self._light is None
                 or patch_rows(self.best_row, self._light_rows, *layout, self._light) < 0
@@ -245,14 +245,13 @@ class ReachSweeper:
             )
         )
 
-    def _full_sweep(self, v: np.ndarray, bound: np.ndarray) -> float:
+    def _full_sweep(self, v: np.ndarray, layout: tuple, bound: np.ndarray) -> float:
         """A full :func:`gauss_seidel_sweep`; from ``HALVES_SWEEP_ENTRIES`` entries on a
         block Gauss-Seidel sweep of two halves of the states in sweep order (about equal
         entries) at once: the later half on the ``"sweep"`` worker, from a copy of ``v``
         that holds the earlier half's values as they were before the sweep, its values then
         copied into ``v``. Every value read is a lower bound, so every update is one, and
         the result does not depend on the threads' timing."""
-        layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
         sides = (True, self.maximize, self.adversary_minimizes, bound)
         st, rows, best = self.states, self.state_rows, self.best_row
         cut = self._cut
