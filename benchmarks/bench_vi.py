@@ -25,13 +25,18 @@ preservation"), so the random model's zero lower bounds are raised to 1e-4 of th
 interval for that run (both tools solve the same file). Model building and file writing
 are not timed.
 
+Like the ``hopnav`` command, the benchmark first sets the process's allocator to reuse freed
+large arrays (:mod:`planner.allocator`: the re-synthesis rebuilds arrays above glibc's
+32 MiB mmap threshold on every call, and faulting their pages in anew costs about a tenth
+of it); ``--system-allocator`` leaves it as it is.
+
 The compiled kernels (numba) are loaded from numba's cache, or compiled on a fresh
 checkout, by the first solve in a process; a small warm-up does that before the timed
 solves and its time is printed. ``--seed`` draws another hazard layout and other intervals.
 
 Run from the repository root:
 ``PYTHONPATH=. python benchmarks/bench_vi.py [--seed 0] [--full] [--storm] [--skip-random]
-[--skip-grid]``
+[--skip-grid] [--system-allocator]``
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ import time
 import numpy as np
 
 from planner._util.threads import concurrently
+from planner.allocator import reuse_freed_memory
 from planner.automaton import RabinAutomaton
 from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteration, solve
 from planner.imdp.analysis import (
@@ -165,8 +171,16 @@ def main() -> None:
     ap.add_argument("--skip-random", action="store_true")
     ap.add_argument("--skip-grid", action="store_true")
     ap.add_argument("--random-states", type=int, default=100_000)
+    ap.add_argument(
+        "--system-allocator",
+        action="store_true",
+        help="leave the allocator as it is (by default freed large arrays are reused, as the "
+        "hopnav command sets it: planner.allocator)",
+    )
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
+    reused = not args.system_allocator and reuse_freed_memory()
+    print(f"freed large arrays reused (planner.allocator, as in the hopnav command): {reused}")
 
     # the compiled kernels are loaded (or, on a fresh checkout, compiled) on first use in a
     # process: do that outside the timed solves and report it

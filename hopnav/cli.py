@@ -26,6 +26,7 @@ from typing import Any, NoReturn
 
 from hopnav import __version__
 from hopnav.errors import EXIT_FAILED, EXIT_USAGE, CommandError, is_interrupt
+from planner.allocator import reuse_freed_memory_unless_disabled
 
 #: command -> (module, one-line help), in the order ``hopnav --help`` lists them.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -182,7 +183,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def entry() -> int:
     """The console script: :func:`main`, then Ctrl-C is ignored while Python shuts down (the
     command has finished and said so; unloading torch takes a second, and an interrupt then
-    would end the process without a word)."""
+    would end the process without a word). Before it, the process's allocator is set to
+    reuse freed large arrays (:mod:`planner.allocator`; ``HOPNAV_REUSE_FREED_MEMORY=0``
+    leaves it as it is)."""
+    reuse_freed_memory_unless_disabled()
     try:
         code = main()
     except KeyboardInterrupt:  # between the command's end and the line below
