@@ -14,7 +14,8 @@ not allocated again).
 
 The setting belongs to the process, not to a library call: the ``hopnav`` command applies
 it at start (``HOPNAV_REUSE_FREED_MEMORY=0`` in the environment leaves the allocator as
-it is), and so do the benchmarks that time re-syntheses. The price: up to ``threshold``
+it is), as do ``scripts/run_simulation.py`` and ``scripts/make_figures.py``, and
+``benchmarks/bench_vi.py``, which times re-syntheses. The price: up to ``threshold``
 bytes freed at the top of the heap stay with the process instead of returning to the
 system, and allocations below ``threshold`` come from the heap.
 """

@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hopper_sim.cli import main as hopnav  # noqa: E402
+from planner.allocator import reuse_freed_memory_unless_disabled  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -77,4 +78,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    reuse_freed_memory_unless_disabled()  # as the hopnav command does
     sys.exit(main())
