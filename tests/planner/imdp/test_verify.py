@@ -223,3 +223,115 @@ def test_lower_bounds_are_rounded_downwards():
     sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
     for x in range(4):
         assert Fraction(sol.lower[x]) <= exact[x] <= Fraction(sol.upper[x])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_row_shown_clear_in_one_pass_is_clear_exactly(seed):
+    # the one-pass filter before the exact excess: where it answers, its bound is at most
+    # 0 and at least the rational excess; values spread, clustered near 1 and nearly equal
+    from planner.imdp.kernels.verify import clear_excess
+
+    rng = np.random.default_rng(seed)
+    n = 12
+    answered = far = far_answered = 0
+    for trial in range(400):
+        kind = trial % 4
+        if kind == 0:
+            u = rng.uniform(0.0, 1.0, n)
+        elif kind == 1:
+            u = 1.0 - rng.uniform(0.0, 1e-9, n)
+        elif kind == 2:
+            u = 0.9 + rng.integers(-3, 4, n) * np.finfo(float).eps
+        else:
+            u = rng.choice([0.2, 0.5, 0.8], n)
+        k = int(rng.integers(1, 10))
+        succ, lo, up = _dyadic_row(rng, k, n)
+        s = int(rng.integers(n))
+        for minimizes in (True, False):
+            got = clear_excess(0, k, succ, lo, up, u, u[s], minimizes)
+            exact = _exact_excess(succ, lo, up, u, u[s], minimizes)
+            if np.isfinite(got):
+                answered += 1
+                assert got <= 0.0
+                assert Fraction(got) >= exact
+            else:
+                assert got == np.inf
+            if exact < -0.05:
+                far += 1
+                far_answered += int(np.isfinite(got))
+    # most rows well below their state are decided here (the pass's savings)
+    assert answered > 250 and far > 100 and far_answered > 0.85 * far
+
+
+def test_a_row_far_below_its_state_is_shown_clear_and_one_at_it_is_left_to_the_exact_check():
+    from planner.imdp.kernels.verify import clear_excess
+
+    succ = np.array([0, 1, 2])
+    lo = np.array([0.25, 0.25, 0.25])
+    up = np.array([0.5, 0.5, 0.5])
+    u = np.array([0.1, 0.2, 0.3, 0.6])
+    for minimizes in (True, False):
+        got = clear_excess(0, 3, succ, lo, up, u, u[3], minimizes)
+        assert np.isfinite(got) and got <= -0.3 + 1e-9
+        # U(s) at the row's value: the exact check decides
+        at = _exact_excess(succ, lo, up, u, 0.0, minimizes)
+        assert clear_excess(0, 3, succ, lo, up, u, float(at), minimizes) == np.inf
+
+
+@pytest.mark.parametrize("sides", [(True, True), (True, False), (False, True), (False, False)])
+def test_the_filtered_check_flags_the_same_states_by_the_same_excess(sides):
+    # per state, the excess of the pass (the filter first) against the exact excess of
+    # every row: a positive excess is the same number, and no violation goes unflagged
+    from planner.imdp import Problem, ReachAvoid, Specification, solve
+    from planner.imdp.kernels.verify import row_excess, state_excesses
+    from planner.imdp.model import first_of_runs
+
+    from .reference import random_imdp
+
+    maximize, adversary_minimizes = sides
+    sat = "pessimistic" if maximize == adversary_minimizes else "optimistic"
+    spec = Specification(ReachAvoid("goal", "bad"), sat, "maximize" if maximize else "minimize")
+    rng = np.random.default_rng(5)
+    flagged = clear = 0
+    for _ in range(6):
+        m = random_imdp(rng, n_states=40, n_actions=3, max_succ=6, zero_lower=True)
+        sol = solve(Problem(m, spec))
+        free = ~sol.fixed
+        rows = np.flatnonzero(free[m.row_state])
+        rs = m.row_state[rows]
+        seg = first_of_runs(rs)
+        state_rows = np.append(seg, rows.size).astype(np.int64)
+        n_long = int(np.max(np.diff(m.row_ptr)))
+        idx, keys, work = np.empty(n_long, np.int64), np.empty(n_long), np.empty(2 * n_long + 8)
+        for u in (sol.upper, np.where(free, sol.upper - 1e-13, sol.upper), rng.random(m.n_states)):
+            u = np.where(free, np.minimum(u, 1.0), sol.upper)
+            got = np.empty(seg.size)
+            args = (rs[seg], state_rows, rows, m.row_ptr, m.successor, m.lower, m.upper, u)
+            state_excesses(0, seg.size, *args, maximize, adversary_minimizes, got)
+            for k, s in enumerate(rs[seg]):
+                if u[s] >= 1.0:
+                    continue
+                ex = [
+                    row_excess(
+                        m.row_ptr[r],
+                        m.row_ptr[r + 1],
+                        m.successor,
+                        m.lower,
+                        m.upper,
+                        u,
+                        u[s],
+                        adversary_minimizes,
+                        idx,
+                        keys,
+                        work,
+                    )
+                    for r in rows[state_rows[k] : state_rows[k + 1]]
+                ]
+                want = max(ex) if maximize else min(ex)
+                if want > 0.0:
+                    flagged += 1
+                    assert got[k] == want
+                else:
+                    clear += 1
+                    assert got[k] <= 0.0
+    assert flagged > 20 and clear > 20
