@@ -204,7 +204,9 @@ def strategy_rows(
     For maximal reachability, optimal rows are picked by a robust attractor from the
     states already settled (value fixed, or 0), so the strategy cannot idle inside an end
     component whose optimal rows all tie: each chosen row moves one layer closer with
-    positive probability under every adversary.
+    positive probability under every adversary. Where no state has two optimal rows there
+    is nothing to pick, and the attractor is not computed (on the random 100k-state
+    benchmark model none has: 0.065 s to 0.02 s).
     """
     n = m.n_states
     choice = np.full(n, -1, dtype=np.int64)
@@ -214,7 +216,7 @@ def strategy_rows(
     opt_local = optimal_rows(q_free, seg, rs, maximize, tol)
     first = opt_local[first_of_runs(rs[opt_local])]
     choice[rs[first]] = free_rows[first]
-    if reach_max:
+    if reach_max and first.size < opt_local.size:
         free = np.zeros(n, dtype=bool)
         free[seg_states] = True
         settled = ~free | (v <= 0)

@@ -106,3 +106,45 @@ def test_independent_parts_keep_whole_components():
     states[[0, m.successor[m.row_ptr[0]]]] = True
     rows = np.flatnonzero(states[m.row_state])
     assert len(independent_parts(m, rows, states)) == 1
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_attractor_picks_only_among_tied_rows(seed):
+    # optimal rows by the attractor from the settled states, as computed in full, against
+    # strategy_rows, which skips the attractor where no state has two optimal rows; for
+    # some seeds the values are 0 or 1/2 so that rows tie
+    from planner.imdp import graph
+    from planner.imdp.model import first_of_runs
+    from planner.imdp.ordering import OrderingAdversary
+    from planner.imdp.strategy import optimal_rows, strategy_rows
+
+    from .reference import random_imdp
+
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=60, n_actions=4, max_succ=5, zero_lower=bool(seed % 2))
+    v = rng.random(m.n_states)
+    v[rng.random(m.n_states) < 0.2] = 0.0
+    if seed % 4 < 2:
+        v = np.where(v > 0.0, 0.5, 0.0)  # rows that avoid the zeros tie
+    free = rng.random(m.n_states) < 0.7
+    rows = np.flatnonzero(free[m.row_state])
+    rs = m.row_state[rows]
+    seg = first_of_runs(rs)
+    q = OrderingAdversary(m, True, rows=rows).expectation(v)
+    got = strategy_rows(m, rows, q, seg, rs[seg], v, True, True, 1e-8)
+    # the reference: always the attractor
+    opt = optimal_rows(q, seg, rs, True, 1e-8)
+    first = opt[first_of_runs(rs[opt])]
+    want = np.full(m.n_states, -1, dtype=np.int64)
+    want[rs[first]] = rows[first]
+    in_free = np.zeros(m.n_states, dtype=bool)
+    in_free[rs[seg]] = True
+    cand = np.zeros(m.n_rows, dtype=bool)
+    cand[rows[opt]] = True
+    _, attr = graph._attractor(m, ~in_free | (v <= 0), cand)
+    want = np.where((attr >= 0) & in_free, attr, want)
+    np.testing.assert_array_equal(got, want)
+    if seed % 4 >= 2:
+        assert first.size == opt.size  # no ties: the skipped case
+    else:
+        assert first.size < opt.size  # ties: the attractor picks
