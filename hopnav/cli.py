@@ -26,6 +26,7 @@ from typing import Any, NoReturn
 
 from hopnav import __version__
 from hopnav.errors import EXIT_FAILED, EXIT_USAGE, CommandError, is_interrupt
+from hopnav.interrupts import interrupt_here
 from planner.allocator import reuse_freed_memory_unless_disabled
 
 #: command -> (module, one-line help), in the order ``hopnav --help`` lists them.
@@ -148,22 +149,26 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def _terminated(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
+    if interrupt_here(signum, frame):  # else numba compiles: delivered again later
+        raise KeyboardInterrupt(f"signal {signum}")
 
 
 @contextmanager
 def _sigterm_as_interrupt() -> Iterator[None]:
     """SIGTERM raises KeyboardInterrupt inside the block (main thread only), so that the
     interrupt handling of the commands (keep finished results, remove temporary files)
-    applies to it too; the previous handler is restored after."""
+    applies to it too, and so does SIGINT, both deferred while numba compiles
+    (:mod:`hopnav.interrupts`); the previous handlers are restored after."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, _terminated)
+    kinds = (signal.SIGTERM, signal.SIGINT)
+    previous = [signal.signal(k, _terminated) for k in kinds]
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for k, handler in zip(kinds, previous, strict=True):
+            signal.signal(k, handler)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -28,6 +28,7 @@ from hopnav.arguments import (
     run_config,
 )
 from hopnav.errors import RunFailed, UsageError, is_interrupt
+from hopnav.interrupts import interrupt_here
 from hopnav.kernels import prepare_kernels
 from planner.modes import Candidates, TourMode
 
@@ -209,7 +210,7 @@ class _WholeEvents:
     def _signal(self, signum: int, frame) -> None:
         if self._busy:
             self._pending = signum
-        else:
+        elif interrupt_here(signum, frame):  # else numba compiles: delivered again later
             self._raised = signum
             raise KeyboardInterrupt(f"signal {signum}")
 

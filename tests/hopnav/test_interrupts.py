@@ -1,0 +1,85 @@
+"""Ctrl-C deferred while numba compiles (hopnav.interrupts)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from hopnav import interrupts
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _frame_in(filename: str):
+    """A live frame of code compiled as if from ``filename``."""
+    space: dict = {}
+    exec(compile("import sys\ndef here():\n    return sys._getframe()\n", filename, "exec"), space)
+    return space["here"]()
+
+
+def test_frames_of_numba_and_llvmlite_count_as_the_compiler():
+    for name in ("numba", "llvmlite"):
+        path = os.sep.join(["", "site-packages", name, "core", "x.py"])
+        assert interrupts.in_compiler(_frame_in(path))
+    assert not interrupts.in_compiler(_frame_in(os.sep.join(["", "work", "planner", "x.py"])))
+    assert not interrupts.in_compiler(sys._getframe())
+    assert not interrupts.in_compiler(None)
+
+
+def test_an_interrupt_inside_the_compiler_is_delivered_again_later(monkeypatch):
+    sent = []
+    monkeypatch.setattr(interrupts._thread, "interrupt_main", sent.append)
+    inside = _frame_in(os.sep.join(["", "site-packages", "llvmlite", "binding", "ffi.py"]))
+    assert interrupts.interrupt_here(signal.SIGINT, inside) is False
+    deadline = time.monotonic() + 5.0
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert sent == [signal.SIGINT]
+    assert interrupts.interrupt_here(signal.SIGINT, sys._getframe()) is True
+
+
+_SCRIPT = textwrap.dedent(
+    """
+    import os, sys, time
+    from hopnav.cli import _sigterm_as_interrupt
+    space = {}
+    # a stand-in for numba's compiler: a second of Python code from a numba path
+    src = "import time\\ndef compile_kernel(ready):\\n    ready()\\n    t = time.monotonic()\\n"
+    src += "    while time.monotonic() - t < 1.0:\\n        pass\\n    return 'compiled'\\n"
+    fake = os.sep.join(["", "site-packages", "numba", "core", "compiler.py"])
+    exec(compile(src, fake, "exec"), space)
+    done = []
+    with _sigterm_as_interrupt():
+        try:
+            done.append(space["compile_kernel"](lambda: print("ready", flush=True)))
+            t = time.monotonic()
+            while time.monotonic() - t < 10.0:
+                pass
+            print("no interrupt")
+        except KeyboardInterrupt:
+            print("interrupted after", done)
+    """
+)
+
+
+@pytest.mark.parametrize("kind", [signal.SIGINT, signal.SIGTERM])
+def test_the_command_takes_an_interrupt_once_the_compiler_has_returned(kind):
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _SCRIPT],
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(0.2)  # inside the stand-in compiler
+    proc.send_signal(kind)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 0
+    assert out.strip() == "interrupted after ['compiled']"
