@@ -47,7 +47,7 @@ def reuse_freed_memory(threshold: int = DEFAULT_THRESHOLD) -> bool:
     Raises:
         ValueError: ``threshold`` not a positive int below 2**31.
     """
-    if not isinstance(threshold, int) or not 0 < threshold < 1 << 31:
+    if isinstance(threshold, bool) or not isinstance(threshold, int) or not 0 < threshold < 1 << 31:
         raise ValueError(f"threshold must be a positive int below 2**31 bytes, got {threshold!r}")
     name = ctypes.util.find_library("c")
     try:

@@ -55,7 +55,7 @@ def test_a_freed_large_block_is_reused_without_faulting_its_pages_again():
     assert 10 * reuse < system
 
 
-@pytest.mark.parametrize("bad", [0, -1, 1 << 31, 2.5, "64"])
+@pytest.mark.parametrize("bad", [0, -1, 1 << 31, 2.5, "64", True])
 def test_a_threshold_out_of_range_is_refused(bad):
     with pytest.raises(ValueError, match="threshold"):
         allocator.reuse_freed_memory(bad)
