@@ -154,7 +154,7 @@ def _terminated(signum: int, frame: Any) -> None:
 
 
 @contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
+def _signals_as_interrupt() -> Iterator[None]:
     """SIGTERM raises KeyboardInterrupt inside the block (main thread only), so that the
     interrupt handling of the commands (keep finished results, remove temporary files)
     applies to it too, and so does SIGINT, both deferred while numba compiles
@@ -175,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default: ``sys.argv[1:]``), run the command, return its exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
-    with _sigterm_as_interrupt():
+    with _signals_as_interrupt():
         try:
             parser = build_parser(command if command in COMMANDS else None)
             args = parser.parse_args(argv)

@@ -206,7 +206,7 @@ def strategy_rows(
     component whose optimal rows all tie: each chosen row moves one layer closer with
     positive probability under every adversary. Where no state has two optimal rows there
     is nothing to pick, and the attractor is not computed (on the random 100k-state
-    benchmark model none has: 0.065 s to 0.02 s).
+    benchmark model none has: 0.065 s to 0.012-0.014 s).
     """
     n = m.n_states
     choice = np.full(n, -1, dtype=np.int64)

@@ -48,7 +48,7 @@ def test_an_interrupt_inside_the_compiler_is_delivered_again_later(monkeypatch):
 _SCRIPT = textwrap.dedent(
     """
     import os, sys, time
-    from hopnav.cli import _sigterm_as_interrupt
+    from hopnav.cli import _signals_as_interrupt
     space = {}
     # a stand-in for numba's compiler: a second of Python code from a numba path
     src = "import time\\ndef compile_kernel(ready):\\n    ready()\\n    t = time.monotonic()\\n"
@@ -56,7 +56,7 @@ _SCRIPT = textwrap.dedent(
     fake = os.sep.join(["", "site-packages", "numba", "core", "compiler.py"])
     exec(compile(src, fake, "exec"), space)
     done = []
-    with _sigterm_as_interrupt():
+    with _signals_as_interrupt():
         try:
             done.append(space["compile_kernel"](lambda: print("ready", flush=True)))
             t = time.monotonic()

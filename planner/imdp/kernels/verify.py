@@ -244,7 +244,7 @@ def clear_excess(a, b, succ, lower, upper, u, us, minimizes) -> float:
         else:
             # every gap below filled and the surplus taken back where ``d`` is lowest
             bound = min(bound, s_l + s_g + (cap - rem) * d_abs)
-        mag += -s_g
+        mag -= s_g  # the filled gaps' terms, |g d|
     else:
         bound = s_l + rem * max(d_below, d_above)
     n = b - a
