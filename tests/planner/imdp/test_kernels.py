@@ -433,20 +433,31 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_leaving_states_updates_the_staying_rows_as_computing_them_anew(seed):
-    from planner.imdp.kernels import leave_states, rows_staying_in
+def test_dropping_states_continues_the_pruning_cascade_as_pruning_anew(seed):
+    """Removing states in steps, through the cascade's state, ends where pruning all of
+    them at once does: the rows staying among the states kept, and no state outside
+    ``keep`` left without one."""
+    from planner.imdp.kernels import drop_states, prune_kernel
 
     rng = np.random.default_rng(seed)
-    m = random_imdp(rng, n_states=150, max_succ=5, zero_lower=bool(seed % 2))
-    rows = rng.random(m.n_rows) < 0.8
-    exclude = rng.random(m.n_states) < 0.05
-    u = rng.random(m.n_states) < 0.9
-    arrays = (m.row_state, m.row_ptr, m.successor, m.upper)
-    stay = rows_staying_in(u, rows, *arrays, exclude)
+    m = random_imdp(rng, n_states=150, max_succ=3, zero_lower=bool(seed % 2))
+    rows = rng.random(m.n_rows) < 0.97
+    keep = rng.random(m.n_states) < 0.05
     inc_ptr, inc_row, _, _, inc_upper = m.reverse_index()
+    arrays = (m.row_state, m.state_ptr, m.row_ptr, m.successor, m.upper)
+    index = (inc_ptr, inc_row, inc_upper)
+    removed = rng.random(m.n_states) < 0.01
+    bad, stay, live = prune_kernel(removed, rows, *arrays, *index, keep)
     for _ in range(5):
-        gone = u & (rng.random(m.n_states) < 0.1)
-        leave_states(np.flatnonzero(gone), stay, m.state_ptr, inc_ptr, inc_row, inc_upper)
-        u = u & ~gone
-        np.testing.assert_array_equal(stay, rows_staying_in(u, rows, *arrays, exclude))
-    assert stay.any()
+        more = ~bad & (rng.random(m.n_states) < 0.01)
+        removed |= more
+        drop_states(np.flatnonzero(more), bad, stay, live, m.row_state, m.state_ptr, *index, keep)
+        want_bad, want_stay, want_live = prune_kernel(removed, rows, *arrays, *index, keep)
+        np.testing.assert_array_equal(bad, want_bad)
+        np.testing.assert_array_equal(stay, want_stay)
+        np.testing.assert_array_equal(live, want_live)
+        entries_out = bad[m.successor] & (m.upper > 0)
+        assert not np.any(np.add.reduceat(entries_out, m.row_ptr[:-1])[stay])
+        assert not np.any(stay & bad[m.row_state])
+        assert np.all((live > 0) | bad | keep)
+    assert stay.any() and bad.any()
