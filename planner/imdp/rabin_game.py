@@ -5,53 +5,11 @@ plays for positive probability of losing."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from planner.imdp import graph
-from planner.imdp.kernels import attractor, counting_order, rows_staying_in
+from planner.imdp.kernels import attractor, counting_order, drop_states, rows_staying_in
 from planner.imdp.model import IMDP, first_of_runs
-
-
-@numba.njit(cache=True, nogil=True)
-def _adversary_attractor(
-    region, start, rows_ok, won, row_state, upper_eff, inc_ptr, inc_row, inc_upper, n_rows
-):
-    """States of ``region`` from which the adversary reaches ``start`` with positive
-    probability whatever the controller does: every available row has an allowed
-    ``upper > 0`` entry into the set (work list). ``won`` states (absorbing) join only if
-    in ``start``."""
-    n = region.size
-    member = start & region
-    count = np.zeros(n, dtype=np.int64)
-    flagged = np.zeros(n_rows, dtype=np.bool_)
-    for r in range(n_rows):
-        if rows_ok[r] and region[row_state[r]]:
-            count[row_state[r]] += 1
-    queue = np.empty(n, dtype=np.int64)
-    tail = 0
-    for s in range(n):
-        if member[s]:
-            queue[tail] = s
-            tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            r = inc_row[k]
-            if flagged[r] or not rows_ok[r] or inc_upper[k] <= 0.0:
-                continue
-            s = row_state[r]
-            if not region[s]:
-                continue
-            flagged[r] = True
-            count[s] -= 1
-            if count[s] == 0 and not member[s] and not won[s]:
-                member[s] = True
-                queue[tail] = s
-                tail += 1
-    return member
 
 
 class _Game:
@@ -131,20 +89,19 @@ class _Game:
         return x & region, choice
 
     def adversary_attractor(self, region, rows_ok, entry_ok, won, start) -> np.ndarray:
+        """States of ``region`` from which the adversary reaches ``start`` with positive
+        probability whatever the controller does: every available row has an allowed
+        ``upper > 0`` entry into the set; ``won`` states (absorbing) join only if in
+        ``start``. The pruning cascade from ``start`` (a state joins once no row is left
+        that avoids the set)."""
         m = self.m
-        _, up, _, inc_up = self._eff(entry_ok)
-        return _adversary_attractor(
-            region,
-            start,
-            rows_ok,
-            won,
-            m.row_state,
-            up,
-            self.inc_ptr,
-            self.inc_row,
-            inc_up,
-            m.n_rows,
-        )
+        _, _, _, inc_up = self._eff(entry_ok)
+        rows = rows_ok & region[m.row_state]
+        live = np.bincount(m.row_state[rows], minlength=m.n_states)
+        member = np.zeros(m.n_states, dtype=bool)
+        index = (m.row_state, m.state_ptr, self.inc_ptr, self.inc_row, inc_up)
+        drop_states(np.flatnonzero(start & region), member, rows, live, *index, won)
+        return member
 
     def closed_rows(self, region, rows_ok, entry_ok) -> np.ndarray:
         m = self.m

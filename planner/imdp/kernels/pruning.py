@@ -12,20 +12,13 @@ import numpy as np
 @numba.njit(cache=True, nogil=True)
 def rows_staying_in(u, rows, row_state, row_ptr, successor, upper, exclude):
     """Rows of ``rows`` at states of ``u`` outside ``exclude`` whose every ``upper > 0``
-    successor lies in ``u``."""
-    n_rows = row_ptr.size - 1
-    out = np.zeros(n_rows, dtype=np.bool_)
-    for r in range(n_rows):
-        s = row_state[r]
-        if not rows[r] or not u[s] or exclude[s]:
-            continue
-        ok = True
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            if upper[e] > 0.0 and not u[successor[e]]:
-                ok = False
-                break
-        out[r] = ok
-    return out
+    successor lies in ``u`` (one pass of :func:`_drop_entering`, the states outside ``u``
+    removed)."""
+    kept = rows & ~exclude[row_state]
+    live = np.zeros(u.size, dtype=np.int64)
+    none = np.empty(0, dtype=np.int64)
+    _drop_entering(none, ~u, kept, live, row_state, row_ptr, successor, upper)
+    return kept
 
 
 @numba.njit(cache=True, nogil=True)

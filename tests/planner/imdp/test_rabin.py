@@ -229,3 +229,38 @@ def test_almost_sure_region_is_closed_so_the_reachability_skips_its_search(formu
         np.testing.assert_array_equal(fast.lower, slow.lower)
         np.testing.assert_array_equal(fast.upper, slow.upper)
         np.testing.assert_array_equal(fast.strategy, slow.strategy)
+
+
+@pytest.mark.parametrize("zero_lower", [False, True])
+def test_adversary_attractor_is_the_plain_fixpoint(zero_lower):
+    """The game's adversary attractor (the pruning cascade from ``start``): a state of the
+    region joins when it has an available row and each one has an allowed ``upper > 0``
+    entry into the set; ``won`` states join only from ``start``."""
+    from planner.imdp.rabin_game import _Game
+    from tests.planner.imdp.reference import random_imdp
+
+    rng = np.random.default_rng(11 + zero_lower)
+    grown = 0
+    for i in range(200):
+        m = random_imdp(rng, int(rng.integers(5, 40)), 3, 4, zero_lower)
+        region = rng.random(m.n_states) < 0.85
+        start = rng.random(m.n_states) < 0.15
+        won = rng.random(m.n_states) < 0.1
+        rows_ok = rng.random(m.n_rows) < 0.9
+        entry_ok = None if i % 3 else rng.random(m.n_entries) < 0.9
+        game = _Game(m, np.zeros(m.n_states, bool), np.zeros(m.n_states, bool))
+        got = game.adversary_attractor(region, rows_ok, entry_ok, won, start)
+        up = m.upper if entry_ok is None else np.where(entry_ok, m.upper, 0.0)
+        want = start & region
+        avail = rows_ok & region[m.row_state]
+        while True:
+            enters = np.add.reduceat((up > 0) & want[m.successor], m.row_ptr[:-1]) > 0
+            n_avail = np.bincount(m.row_state[avail], minlength=m.n_states)
+            n_enter = np.bincount(m.row_state[avail & enters], minlength=m.n_states)
+            grow = want | (region & ~won & (n_avail > 0) & (n_enter == n_avail))
+            if np.array_equal(grow, want):
+                break
+            want = grow
+        np.testing.assert_array_equal(got, want)
+        grown += int(want.sum() > (start & region).sum())
+    assert grown > 50
