@@ -43,7 +43,8 @@ and ``converged`` is ``False``).
 (``ReachResult.verified``); the floating-point checks above only steer. Where the raise
 would open a closed bracket (long stays: it sums an allowance along them), the bound as it
 is is checked first and kept if shown; a uniform raise is checked beside the widening's
-search for short stays, which stops once it is shown (:func:`_certificate`).
+search for short stays, which stops once it is shown
+(:func:`planner.imdp.widening.certified_upper`).
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
 if few, are solved by strategy iteration with the others held; else, if the residuals
@@ -55,8 +56,6 @@ V_sigma)`` soundly.
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -69,11 +68,12 @@ from planner.imdp.interval import (
     LOCAL_FRACTION,
     interval_iteration,
 )
-from planner.imdp.kernels import ReachSweeper, layers
+from planner.imdp.kernels import ReachSweeper
+from planner.imdp.kernels.sweeps import sweep_layout
 from planner.imdp.model import IMDP
 from planner.imdp.problem import ValueIteration
 from planner.imdp.strategy import SI_MAX_STATES
-from planner.imdp.widening import rounding_widened, uniformly_widened
+from planner.imdp.widening import certified_upper
 
 _OVI_TRIES = 3
 """Failed candidates before the upper bound is iterated from 1 instead."""
@@ -185,11 +185,13 @@ class _ReachSweeps:
         adversary_minimizes: bool,
         maximize: bool,
         alg: ValueIteration,
+        sweeper: ReachSweeper | None = None,
     ) -> None:
         self.m, self.free_rows, self.fixed_val, self.alg = m, free_rows, fixed_val, alg
         self.adversary_minimizes, self.maximize = adversary_minimizes, maximize
-        dist = layers(m, free_rows, fixed_val == 1.0)
-        self.sweeper = ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)
+        if sweeper is None:
+            sweeper = sweep_layout(m, free_rows, fixed_val, maximize, adversary_minimizes)
+        self.sweeper = sweeper
         self.v = fixed_val.copy()
         self.upper: np.ndarray | None = None
         self.residual = 0.0
@@ -213,7 +215,7 @@ class _ReachSweeps:
             self.it,
             self.sigma,
             self.evaluations,
-            self.sweeper.row_values(self.v),
+            self.sweeper.row_values(self.v, strategy.optimal_slack(self.alg.tolerance)),
             self.upper_sweeps,
         )
 
@@ -396,9 +398,11 @@ def reach_values(
     adversary_minimizes: bool,
     maximize: bool,
     alg: ValueIteration,
+    sweeper: ReachSweeper | None = None,
 ) -> ReachResult:
     """Reachability values of the free states by sweeps from below and a certified upper
-    bound (see the module docstring); ``fixed_val`` holds the settled states' values.
+    bound (see the module docstring); ``fixed_val`` holds the settled states' values;
+    ``sweeper``: their :func:`sweep_layout`, if already built (for the first solve).
 
     When the bracket closed but the rounding widening then opened it again (at tolerances
     near ``1e-12``, where the widening of long stays is a sizeable part of the tolerance),
@@ -407,10 +411,11 @@ def reach_values(
         v = fixed_val.copy()
         return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0, verified=True)
 
-    def solved(a: ValueIteration) -> tuple[ReachResult, bool]:
-        return _reach_once(_ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, a))
+    def solved(a: ValueIteration, layout: ReachSweeper | None = None) -> tuple[ReachResult, bool]:
+        run = _ReachSweeps(m, free_rows, fixed_val, adversary_minimizes, maximize, a, layout)
+        return _reach_once(run)
 
-    result, closed = solved(alg)
+    result, closed = solved(alg, sweeper)
     if closed and _width(result) >= alg.tolerance:
         again, _ = solved(replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION))
         kept = again if _width(again) < _width(result) else result
@@ -456,44 +461,8 @@ def _reach_once(run: _ReachSweeps) -> tuple[ReachResult, bool]:
 def _certificate(
     run: _ReachSweeps, lower: np.ndarray, upper: np.ndarray, closed: bool, sweeper: ReachSweeper
 ) -> tuple[bool, np.ndarray]:
-    """``(shown, bound)``: ``upper`` widened for rounding and checked in exact arithmetic
-    (:func:`planner.imdp.certify.verify_upper`; the bound it raised where shown, else the
-    widened one). Where the widening would open a ``closed`` bracket (long stays), the
-    bound as it is is checked first and kept if shown within the tolerance: the widening
-    is a raise that speeds the exact check, no proof. Where the widening searches for
-    short stays (closed bracket, maximising, at most ``SI_MAX_STATES`` free states), the
-    bound raised uniformly (:func:`planner.imdp.widening.uniformly_widened`) is checked
-    here meanwhile, kept if shown within the tolerance, and the search stopped (the random
-    100k-state benchmark model has no such search: checking it there cost 0.1-0.2 s)."""
-    m, free_rows, alg = run.m, run.free_rows, run.alg
+    """:func:`planner.imdp.widening.certified_upper` for the solve ``run``."""
     sides = (run.maximize, run.adversary_minimizes)
-
-    widening = (m, free_rows, lower, upper, run.adversary_minimizes, run.maximize)
-
-    def rounding(stop: Callable[[], bool] | None = None) -> np.ndarray | None:
-        return rounding_widened(*widening, alg.tolerance, sweeper, stop=stop)
-
-    if not closed or not run.maximize or sweeper.states.size > SI_MAX_STATES:
-        widened = rounding()
-    else:
-        # the uniform raise checked here while the widening searches on a second thread;
-        # the search stops once the check has shown the raise
-        shown_here = threading.Event()
-
-        def uniform() -> tuple[bool, np.ndarray] | None:
-            raised = uniformly_widened(lower, upper, sweeper.states, alg.tolerance)
-            verified, shown = certify.verify_upper(m, free_rows, raised, *sides)
-            if verified and np.max(shown - lower, initial=0.0) < alg.tolerance:
-                shown_here.set()
-                return True, shown
-            return None
-
-        widened, quick = concurrently(lambda: rounding(shown_here.is_set), uniform, "widen")
-        if quick is not None:
-            return quick
-    if closed and np.max(widened - lower, initial=0.0) >= alg.tolerance:
-        verified, shown = certify.verify_upper(m, free_rows, upper, *sides)
-        if verified and np.max(shown - lower, initial=0.0) < alg.tolerance:
-            return True, shown
-    verified, shown = certify.verify_upper(m, free_rows, widened, *sides)
-    return verified, (shown if verified else widened)
+    return certified_upper(
+        run.m, run.free_rows, run.alg.tolerance, *sides, lower, upper, closed, sweeper
+    )

@@ -56,11 +56,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from planner._util.threads import concurrently
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.discounted import discounted_values
+from planner.imdp.kernels import ReachSweeper
 from planner.imdp.minimal import dual_reach, unavoidable_reach
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import (
     DiscountedReward,
@@ -72,7 +74,7 @@ from planner.imdp.problem import (
     ValueIteration,
     resolve_states,
 )
-from planner.imdp.reachability import reach_values
+from planner.imdp.reachability import reach_values, sweep_layout
 from planner.imdp.strategy import strategy_actions
 from planner.modes import Adversary, Objective
 
@@ -98,15 +100,18 @@ def _settled(
     pessimistic: bool,
     precompute: bool,
     target_closed: bool = False,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, ReachSweeper | None]:
     """The states of a reach-avoid problem settled before iterating: ``(settled, value,
-    choice)``: targets, avoided states and (with ``precompute``) the states of value 0
-    and, worst case maximising or minimising, of value 1 by graph analysis; ``choice`` the
-    row by which a settled state attains its value where the action matters (-1
-    elsewhere): a maximising strategy's way to the target from its value-1 states, a
+    choice, guessed)``: targets, avoided states and (with ``precompute``) the states of
+    value 0 and, worst case maximising or minimising, of value 1 by graph analysis;
+    ``choice`` the row by which a settled state attains its value where the action matters
+    (-1 elsewhere): a maximising strategy's way to the target from its value-1 states, a
     minimising one's way to stay clear of it at its value-0 states. ``target_closed``:
     the target holds every state that reaches it almost surely, so the probability-1
-    search is skipped."""
+    search is skipped. Worst case maximising, on large models, the sweeps' layout is
+    built on a second thread while that search runs, for the settled states as they will
+    be if it finds no state outside the target; ``guessed`` is that layout where the guess
+    came true, else ``None``."""
     n = m.n_states
     target = resolve_states(m, prop.target, "target")
     avoid = (
@@ -116,12 +121,26 @@ def _settled(
     )
     choice = np.full(n, -1, dtype=np.int64)
     prob1 = np.zeros(n, dtype=bool)
+    guessed = None
     if not precompute:
         zero = np.zeros(n, dtype=bool)
     elif maximize and pessimistic:
         pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
         if not target_closed:
-            prob1, choice = graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+
+            def almost_sure() -> tuple[np.ndarray, np.ndarray]:
+                return graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+
+            def guess() -> ReachSweeper:
+                free = np.flatnonzero(rows & (pos & ~target & ~avoid)[m.row_state])
+                return sweep_layout(m, free, np.where(target, 1.0, 0.0), True, True)
+
+            if m.n_entries < GUESS_ENTRIES:
+                prob1, choice = almost_sure()
+            else:
+                guessed, (prob1, choice) = concurrently(guess, almost_sure, "layout")
+                if np.any(prob1 & ~target):
+                    guessed = None
             choice = np.where(prob1, choice, -1)
         zero = ~pos
     elif maximize:
@@ -138,7 +157,15 @@ def _settled(
             escape = graph.possible_reach(m, zero, target, rows)
         prob1 = ~escape & ~target & ~zero
     settled = target | avoid | zero | prob1
-    return settled, np.where(target | prob1, 1.0, 0.0), choice
+    return settled, np.where(target | prob1, 1.0, 0.0), choice, guessed
+
+
+GUESS_ENTRIES = 100_000
+"""Entries of a model from which the sweeps' layout is built on a second thread while the
+probability-1 search runs (:func:`_settled`'s ``guess``), as if that search found no
+state outside the target (it finds none on the benchmarks of ``benchmarks/bench_vi.py``:
+the layout's 0.025-0.045 s then overlap the search's 0.015-0.025 s); where it finds
+some, the layout is built anew."""
 
 
 def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np.ndarray):
@@ -183,24 +210,24 @@ def solve_with(
     reach = isinstance(prop, ReachAvoid)
     if reach and alg.initial is not None:
         raise SpecificationError("initial values are for discounted reward (reachability from 0)")
+    layout = None  # the sweeps' layout, built beside the probability-1 search
     if reach:
-        settled, fixed_val, settled_choice = _settled(
+        settled, fixed_val, settled_choice, layout = _settled(
             m, prop, rows, maximize, pessimistic, alg.precompute, target_closed
         )
         fixed = fixed | settled
     fixed_val = np.where(fixed, fixed_val, 0.0)
     free_rows = np.flatnonzero(rows & ~fixed[m.row_state])
     rs = m.row_state[free_rows]
-    seg = np.flatnonzero(np.concatenate(([True], rs[1:] != rs[:-1]))) if rs.size else rs
-    sigma = None
-    evaluations = upper_sweeps = 0
+    seg = first_of_runs(rs)
+    sigma, evaluations, upper_sweeps = None, 0, 0
     # a minimising strategy, certified: through its dual (see the module docstring)
     dual = reach and not maximize and alg.precompute and alg.certified
     if reach:
         if dual:
             lower, upper, r = dual_reach(m, free_rows, fixed, fixed_val, adversary_minimizes, alg)
         else:
-            r = reach_values(m, free_rows, fixed_val, adversary_minimizes, maximize, alg)
+            r = reach_values(m, free_rows, fixed_val, adversary_minimizes, maximize, alg, layout)
             lower, upper = r.lower, r.upper
         v, residual, it, sigma = lower.copy(), r.residual, r.iterations, r.sigma
         evaluations, q_free, upper_sweeps = r.evaluations, r.q, r.upper_sweeps

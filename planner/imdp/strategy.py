@@ -162,13 +162,19 @@ def _surest_start(
     return free_rows[near[pick]]
 
 
+def optimal_slack(tol: float) -> float:
+    """How far below its state's best a row's value may be and the row still count as
+    optimal: ``max(10 tol, 1e-12)``."""
+    return max(10 * tol, 1e-12)
+
+
 def optimal_rows(
     q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool, tol: float
 ) -> np.ndarray:
     """Indices of the rows (values ``q``, states ``rs`` in runs starting at ``seg``)
-    within ``max(10 tol, 1e-12)`` of their state's best: the rows that count as optimal."""
+    within :func:`optimal_slack` of their state's best: the rows that count as optimal."""
     best = (np.maximum if maximize else np.minimum).reduceat(q, seg)[run_ids(rs)]
-    return np.flatnonzero(np.abs(q - best) <= max(10 * tol, 1e-12))
+    return np.flatnonzero(np.abs(q - best) <= optimal_slack(tol))
 
 
 def strategy_actions(

@@ -3,12 +3,14 @@ raised by before its exact check (:func:`rounding_widened`)."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
 
-from planner.imdp import strategy
+from planner._util.threads import concurrently
+from planner.imdp import certify, strategy
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.kernels.upper import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs, run_ids
@@ -156,3 +158,55 @@ def uniformly_widened(
     out = upper.copy()
     out[st] = np.minimum(1.0, upper[st] + UNIFORM_SHARE * max(room, 0.0))
     return out
+
+
+def certified_upper(
+    m: IMDP,
+    free_rows: np.ndarray,
+    tolerance: float,
+    maximize: bool,
+    adversary_minimizes: bool,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    closed: bool,
+    sweeper: ReachSweeper,
+) -> tuple[bool, np.ndarray]:
+    """``(shown, bound)``: ``upper`` widened for rounding and checked in exact arithmetic
+    (:func:`planner.imdp.certify.verify_upper`; the bound it raised where shown, else the
+    widened one). Where the widening would open a ``closed`` bracket (long stays), the
+    bound as it is is checked first and kept if shown within the tolerance: the widening
+    is a raise that speeds the exact check, no proof. Where the widening searches for
+    short stays (closed bracket, maximising, at most ``SI_MAX_STATES`` free states), the
+    bound raised uniformly (:func:`uniformly_widened`) is checked
+    here meanwhile, kept if shown within the tolerance, and the search stopped (the random
+    100k-state benchmark model has no such search: checking it there cost 0.1-0.2 s)."""
+    sides = (maximize, adversary_minimizes)
+    widening = (m, free_rows, lower, upper, adversary_minimizes, maximize)
+
+    def rounding(stop: Callable[[], bool] | None = None) -> np.ndarray | None:
+        return rounding_widened(*widening, tolerance, sweeper, stop=stop)
+
+    if not closed or not maximize or sweeper.states.size > SI_MAX_STATES:
+        widened = rounding()
+    else:
+        # the uniform raise checked here while the widening searches on a second thread;
+        # the search stops once the check has shown the raise
+        shown_here = threading.Event()
+
+        def uniform() -> tuple[bool, np.ndarray] | None:
+            raised = uniformly_widened(lower, upper, sweeper.states, tolerance)
+            verified, shown = certify.verify_upper(m, free_rows, raised, *sides)
+            if verified and np.max(shown - lower, initial=0.0) < tolerance:
+                shown_here.set()
+                return True, shown
+            return None
+
+        widened, quick = concurrently(lambda: rounding(shown_here.is_set), uniform, "widen")
+        if quick is not None:
+            return quick
+    if closed and np.max(widened - lower, initial=0.0) >= tolerance:
+        verified, shown = certify.verify_upper(m, free_rows, upper, *sides)
+        if verified and np.max(shown - lower, initial=0.0) < tolerance:
+            return True, shown
+    verified, shown = certify.verify_upper(m, free_rows, widened, *sides)
+    return verified, (shown if verified else widened)

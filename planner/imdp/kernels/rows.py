@@ -141,17 +141,18 @@ def longest_row(row_ptr) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def all_row_values(row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes):
-    """The adversary's expectation of ``v`` for every row of the layout."""
+def all_row_values(
+    first, last, out, row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes
+) -> None:
+    """The adversary's expectation of ``v`` for the rows ``first:last`` of the layout, into
+    ``out`` (their critical successors updated)."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
-    out = np.empty(row_ptr.size - 1)
-    for r in range(row_ptr.size - 1):
+    for r in range(first, last):
         q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
         if q != q:
             q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
         out[r] = q
-    return out
 
 
 @numba.njit(cache=True, nogil=True)

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner._util.threads import concurrently, in_halves
+from planner.imdp.kernels.elimination import SKIP_MARGIN, bounded_row_values, rise_since
 from planner.imdp.kernels.rows import (
     all_row_values,
     below,
@@ -31,6 +32,7 @@ from planner.imdp.kernels.rows import (
     sorted_value,
     threshold_value,
 )
+from planner.imdp.kernels.search import layers
 from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
 
@@ -51,6 +53,9 @@ def gauss_seidel_sweep(
     maximize,
     adversary_minimizes,
     bound,
+    qbase,
+    last,
+    c_now,
 ) -> float:
     """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
     ``states`` in order, in place; returns ``max_s`` of the change.
@@ -74,11 +79,22 @@ def gauss_seidel_sweep(
     evaluated first, and a row whose bound is below the best value found so far is skipped:
     it can neither beat nor tie it, so values and best rows are those of the full sweep
     (action elimination).
+
+    ``qbase`` (a maximising strategy; empty: none) does the same without a bound from
+    above (:mod:`planner.imdp.kernels.elimination`): per layout row its value when last
+    evaluated less ``c_now`` then, where ``c_now`` (kept by :meth:`ReachSweeper.sweep`)
+    sums every sweep's residual and every rise of the values between sweeps; a row whose
+    ``qbase + c_now + r`` (``r`` this sweep's residual so far) plus ``SKIP_MARGIN`` is
+    below the best value found so far is skipped. ``last`` (empty: none) receives every
+    value written, for the rise between sweeps.
     """
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     residual = 0.0
-    prune = full and maximize and bound.size > 0
+    has_bound = bound.size > 0
+    has_base = qbase.size > 0
+    prune = full and maximize and (has_bound or has_base)
+    track = last.size > 0
     for k in range(states.size):
         s = states[k]
         if full:
@@ -98,14 +114,21 @@ def gauss_seidel_sweep(
                 best = sorted_value(
                     arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                 )
+            rise = c_now + residual + SKIP_MARGIN
+            if has_base:
+                qbase[arg] = best - c_now
             for r in range(lo, hi):
-                if r == arg or bound[r] < best:
+                if r == arg or (has_bound and bound[r] < best):
+                    continue
+                if has_base and qbase[r] + rise < best:
                     continue
                 q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                 if q != q:
                     q = sorted_value(
                         r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                     )
+                if has_base:
+                    qbase[r] = q - c_now
                 if q > best or (q == best and r < arg):
                     best = q
                     arg = r
@@ -125,10 +148,16 @@ def gauss_seidel_sweep(
         best = below(best, arg, row_ptr)
         if best > old:
             v[s] = best
+            if track:
+                last[s] = best
             if best - old > residual:
                 residual = best - old
     return residual
 
+
+ELIMINATE = True
+"""Full sweeps of a maximising strategy skip rows by their last values
+(:func:`gauss_seidel_sweep`'s ``qbase``)."""
 
 HALVES_SWEEP_ENTRIES = 100_000
 """Entries of a full sweep from which :meth:`ReachSweeper.sweep` runs it in two halves at
@@ -179,17 +208,22 @@ class ReachSweeper:
         adversary_minimizes: bool,
     ) -> None:
         m = model
+        # the states in increasing key (a stable sort of the states, then each state's run
+        # of rows: the order of (key, row), without sorting the rows)
         rs = m.row_state[free_rows]
-        order = np.lexsort((free_rows, sweep_key[rs]))
+        first = first_of_runs(rs)
+        by_key = np.argsort(sweep_key[rs[first]], kind="stable")
+        starts = first[by_key]
+        lens = np.diff(np.append(first, rs.size))[by_key]
+        ptr = np.concatenate(([0], np.cumsum(lens)))
+        order = np.arange(rs.size) + np.repeat(starts - ptr[:-1], lens)
         self._position = order
         rows = free_rows[order]
         self.rows = rows
         """The model row of every row of the layout."""
-        rs = rs[order]
-        first = first_of_runs(rs)
-        self.states = rs[first].astype(np.int64)
+        self.states = rs[starts].astype(np.int64)
         """The free states in sweep order."""
-        self.state_rows = np.append(first, rows.size).astype(np.int64)
+        self.state_rows = ptr.astype(np.int64)
         lens = m.row_ptr[rows + 1] - m.row_ptr[rows]
         self.row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
         self.remaining = 1.0 - m.row_lower_sum[rows]
@@ -215,6 +249,12 @@ class ReachSweeper:
         self._light: tuple[np.ndarray, ...] | None = None
         self._light_rows = self.best_row
         self._no_cache = np.empty(0)
+        # action elimination from the rows' last values (a maximising strategy; see
+        # gauss_seidel_sweep): per layout row its last value less the rise then, the
+        # values after the last sweep, and the rise of the values since the first sweep
+        self._qbase = np.full(rows.size, np.inf) if self.maximize and ELIMINATE else self._no_cache
+        self._last = self._no_cache
+        self._rise = 0.0
         # the first state of the later half of a full sweep in halves (0: whole)
         half = np.searchsorted(self.state_rows, np.searchsorted(self.row_ptr, n_ent // 2))
         self._cut = int(half) if n_ent >= HALVES_SWEEP_ENTRIES and half < self.states.size else 0
@@ -225,6 +265,10 @@ class ReachSweeper:
         of the passes from above, is below the best found are skipped; from
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
         the best rows of the last full sweep."""
+        if self._last.size != v.size:
+            self._last = v.copy()
+        else:
+            self._rise += rise_since(v, self._last)
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
             residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
@@ -234,20 +278,25 @@ class ReachSweeper:
             ):
                 self._light_rows = self.best_row.copy()
                 self._light = gather_rows(self.best_row, *layout)
-            return residual
-        return float(
-            gauss_seidel_sweep(
-                self.states,
-                self._one_row,
-                *self._light,
-                v,
-                self._one_row,
-                False,
-                self.maximize,
-                self.adversary_minimizes,
-                self._no_cache,
+        else:
+            residual = float(
+                gauss_seidel_sweep(
+                    self.states,
+                    self._one_row,
+                    *self._light,
+                    v,
+                    self._one_row,
+                    False,
+                    self.maximize,
+                    self.adversary_minimizes,
+                    self._no_cache,
+                    self._no_cache,
+                    self._last,
+                    self._rise,
+                )
             )
-        )
+        self._rise += residual
+        return residual
 
     def _full_sweep(self, v: np.ndarray, layout: tuple, bound: np.ndarray) -> float:
         """A full :func:`gauss_seidel_sweep`; from ``HALVES_SWEEP_ENTRIES`` entries on a
@@ -256,7 +305,8 @@ class ReachSweeper:
         that holds the earlier half's values as they were before the sweep, its values then
         copied into ``v``. Every value read is a lower bound, so every update is one, and
         the result does not depend on the threads' timing."""
-        sides = (True, self.maximize, self.adversary_minimizes, bound)
+        sides = (True, self.maximize, self.adversary_minimizes, bound, self._qbase, self._last)
+        sides = (*sides, self._rise)
         st, rows, best = self.states, self.state_rows, self.best_row
         cut = self._cut
         if cut == 0:
@@ -370,19 +420,43 @@ class ReachSweeper:
         )
         return sp.csr_matrix((prob, succ, ptr), shape=(back.size, self._model.n_states))
 
-    def row_values(self, v: np.ndarray) -> np.ndarray:
+    def row_values(self, v: np.ndarray, slack: float | None = None) -> np.ndarray:
         """The robust expectation of ``v`` for every free row, in the order of the
-        ``free_rows`` given to the constructor."""
-        q = all_row_values(
-            self.row_ptr,
-            self.remaining,
-            self.succ,
-            self.lower,
-            self.gap,
-            self.crit,
-            v,
-            self.adversary_minimizes,
-        )
+        ``free_rows`` given to the constructor. With ``slack`` (``v`` the vector swept), a
+        row shown worse than its state's best by more than ``slack`` from its last value
+        (the sweeps' action elimination) may get a bound instead, at least its value and
+        still worse than the best by more than ``slack`` (:func:`bounded_row_values`): the
+        rows within ``slack`` of the best, and which they are, are exact."""
+        q = np.empty(self.rows.size)
+        layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
+        bounded = slack is not None and self._qbase.size > 0 and self._last.size == v.size
+        if bounded:
+            self._rise += rise_since(v, self._last)
+            work = self.row_ptr[self.state_rows]
+            args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
+
+            def fill(first: int, last: int) -> None:
+                bounded_row_values(first, last, q, *args, *layout, v, self.adversary_minimizes)
+
+        else:
+            work = self.row_ptr
+
+            def fill(first: int, last: int) -> None:
+                all_row_values(first, last, q, *layout, v, self.adversary_minimizes)
+
+        if self.row_ptr[-1] >= HALVES_SWEEP_ENTRIES:
+            in_halves(fill, work, "sweep")
+        else:
+            fill(0, work.size - 1)
         out = np.empty_like(q)
         out[self._position] = q
         return out
+
+
+def sweep_layout(
+    m: IMDP, free_rows: np.ndarray, fixed_val: np.ndarray, maximize: bool, adversary_minimizes: bool
+) -> ReachSweeper:
+    """The sweeps' layout of the free rows, the states in order of graph distance to the
+    value-1 states of ``fixed_val`` (:func:`planner.imdp.kernels.search.layers`)."""
+    dist = layers(m, free_rows, fixed_val == 1.0)
+    return ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)

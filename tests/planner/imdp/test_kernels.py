@@ -5,7 +5,7 @@ import pytest
 
 from planner.imdp import IMDP
 from planner.imdp.graph import _attractor, forced_into
-from planner.imdp.kernels import ReachSweeper, sweeps
+from planner.imdp.kernels import ReachSweeper, search, sweeps
 from tests.planner.imdp.reference import random_imdp, ref_expectation, rows_of
 
 
@@ -419,7 +419,8 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
         want = v.copy()
         later = v.copy()
         layout = (ref.row_ptr, ref.remaining, ref.succ, ref.lower, ref.gap, ref.crit)
-        sides = (True, True, True, np.empty(0))
+        none = np.empty(0)
+        sides = (True, True, True, none, none, none, 0.0)
         st, rows, best = ref.states, ref.state_rows, ref.best_row
         r0 = gauss_seidel_sweep(st[:cut], rows[: cut + 1], *layout, want, best[:cut], *sides)
         r1 = gauss_seidel_sweep(st[cut:], rows[cut:], *layout, later, best[cut:], *sides)
@@ -461,3 +462,97 @@ def test_dropping_states_continues_the_pruning_cascade_as_pruning_anew(seed):
         assert not np.any(stay & bad[m.row_state])
         assert np.all((live > 0) | bad | keep)
     assert stay.any() and bad.any()
+
+
+def _chain_imdp(rng: np.random.Generator, n: int) -> IMDP:
+    """States ``0..n-1`` whose rows go ``1..40`` states up (and, in one row of three,
+    also to a random state), with some lower bounds 0: an attractor of the top states
+    grows against the index order, so a forward pass from state 0 lets few states join."""
+    s, a, t, lo, up = [], [], [], [], []
+    for q in range(n - 1):
+        for act in range(3):
+            succ = sorted({min(q + int(j), n - 1) for j in rng.integers(1, 40, size=2)})
+            if act == 0:
+                succ = sorted(set(succ) | {int(rng.integers(0, n))})
+            p = rng.dirichlet(np.ones(len(succ)))
+            low = np.where(rng.random(len(succ)) < 0.3, 0.0, 0.5 * p)
+            s += [q] * len(succ)
+            a += [act] * len(succ)
+            t += succ
+            lo += low.tolist()
+            up += np.minimum(1.0, p + 0.2).tolist()
+    s, a, t, lo, up = [*s, n - 1], [*a, 0], [*t, n - 1], [*lo, 1.0], [*up, 1.0]
+    return IMDP(n, s, a, t, lo, up)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_attractor_after_a_forward_pass_that_does_not_pay(seed):
+    """On a model whose attractor grows against the index order the forward passes stop
+    early and the work list does the rest: the same fixpoint, and choices that replay."""
+    rng = np.random.default_rng(seed)
+    m = _chain_imdp(rng, 3000)
+    start = np.zeros(m.n_states, dtype=bool)
+    start[-5:] = True
+    cand = rng.random(m.n_rows) < 0.9
+    x, choice = _attractor(m, start, cand)
+    assert np.array_equal(x, _naive_attractor(m, start, cand))
+    assert x.sum() > 2000
+    # the passes alone stop far short: the work list found most of it
+    passed = start.copy()
+    arrays = (m.row_state, m.row_ptr, m.successor, m.lower, m.upper)
+    search._forward_passes(passed, np.full(m.n_states, -1), cand, *arrays, True)
+    assert passed.sum() < x.sum() // 2
+    joined = start.copy()
+    pending = np.flatnonzero(x & ~start)
+    while pending.size:
+        forced = forced_into(m, joined)
+        ready = pending[forced[choice[pending]] & cand[choice[pending]]]
+        assert ready.size, "a chosen row does not lead into earlier states"
+        assert (m.row_state[choice[ready]] == ready).all()
+        joined[ready] = True
+        pending = np.setdiff1d(pending, ready)
+
+
+def _raise_some(rng: np.random.Generator, *vs: np.ndarray) -> None:
+    """The same random rise of a few values of each of ``vs``, in place (as strategy
+    iteration or an end-component collapse raises values between sweeps)."""
+    at = rng.random(vs[0].size) < 0.1
+    by = rng.uniform(0.0, 0.5, size=vs[0].size)
+    for v in vs:
+        v[at] = np.minimum(1.0, v[at] + by[at])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_skipping_rows_by_their_last_values_changes_no_sweep(seed, monkeypatch):
+    """Full sweeps that skip rows shown worse than the best from their last values (and
+    the rises of the values since, those between sweeps included) give the values, best
+    rows and residuals of sweeps that evaluate every row; the bounded row values keep the
+    optimal rows exact and the others above their value and below the best."""
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=150, n_actions=5, max_succ=6, zero_lower=bool(seed % 2))
+    minimizes = bool(seed < 2)
+    monkeypatch.setattr(sweeps, "ELIMINATE", False)
+    plain = _sweeper(m, minimizes)
+    monkeypatch.setattr(sweeps, "ELIMINATE", True)
+    skip = _sweeper(m, minimizes)
+    v0 = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    v0[0] = 0.0
+    a, b = v0.copy(), v0.copy()
+    for step in range(40):
+        full = step % 3 == 0 or rng.random() < 0.3
+        assert plain.sweep(a, full) == skip.sweep(b, full)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(plain.best_row, skip.best_row)
+        if rng.random() < 0.3:
+            _raise_some(rng, a, b)
+    slack = 1e-7
+    exact = plain.row_values(a)
+    bounded = skip.row_values(b, slack)
+    q = exact[skip._position]  # layout order
+    qb = bounded[skip._position]
+    best = np.maximum.reduceat(q, skip.state_rows[:-1])
+    best = np.repeat(best, np.diff(skip.state_rows))
+    near = q >= best - slack
+    np.testing.assert_array_equal(qb[near], q[near])
+    assert (qb[~near] >= q[~near] - 1e-15).all() and (qb[~near] < best[~near] - slack).all()
+    assert (~near).sum() > 0 and (qb[~near] != q[~near]).any()

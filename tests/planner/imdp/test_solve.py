@@ -26,6 +26,7 @@ from tests.planner.imdp.reference import (
 )
 
 solve_module = importlib.import_module("planner.imdp.reachability")
+widening = importlib.import_module("planner.imdp.widening")
 
 
 def reach(m, target, avoid=None, sat="pessimistic", strategy="maximize", **kw):
@@ -533,7 +534,7 @@ def test_a_bracket_opened_by_the_rounding_widening_is_solved_again(monkeypatch):
     # would be shown here: it stands in for one that fails (the bound from below)
     m = sticky_imdp(np.random.default_rng(3), 120)
     spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
-    monkeypatch.setattr(solve_module, "uniformly_widened", lambda lower, *args: lower.copy())
+    monkeypatch.setattr(widening, "uniformly_widened", lambda lower, *args: lower.copy())
     calls = _counted_solves(monkeypatch)
     sol = solve(Problem(m, spec), ValueIteration(1e-12))
     assert sol.converged and sol.error < 1e-12
@@ -547,14 +548,14 @@ def test_the_uniform_raise_is_shown_and_the_widening_stops(monkeypatch):
     m = sticky_imdp(np.random.default_rng(3), 120)
     spec = Specification(ReachAvoid("goal", "bad"), "pessimistic", "minimize")
     calls = _counted_solves(monkeypatch)
-    widen = solve_module.rounding_widened
+    widen = widening.rounding_widened
     stops = []
 
     def watched(*args, stop=None, **kw):
         stops.append(stop)
         return widen(*args, stop=stop, **kw)
 
-    monkeypatch.setattr(solve_module, "rounding_widened", watched)
+    monkeypatch.setattr(widening, "rounding_widened", watched)
     sol = solve(Problem(m, spec), ValueIteration(1e-12))
     assert sol.converged and sol.error < 1e-12 and len(calls) == 1
     # the search ran beside the check and was told to stop (whether it had ended by then
@@ -669,3 +670,39 @@ def test_sweeps_in_halves_reach_the_reference_values_and_repeat_exactly(zero_low
                 np.testing.assert_array_equal(got.lower, again.lower)
                 np.testing.assert_array_equal(got.upper, again.upper)
                 np.testing.assert_array_equal(got.strategy, again.strategy)
+
+
+@pytest.mark.parametrize("certified", [False, True])
+def test_the_layout_built_beside_the_probability_1_search_changes_nothing(certified, monkeypatch):
+    """The sweeps' layout built on a second thread while the probability-1 search runs (as
+    if it found no state outside the target) gives the solve of a layout built after it,
+    where the guess comes true and where it does not."""
+    solve_mod = importlib.import_module("planner.imdp.solve")
+    layout = solve_module.sweep_layout
+    rng = np.random.default_rng(11)
+    outcomes = set()
+    for _ in range(12):
+        m = random_imdp(rng, n_states=40, n_actions=3, max_succ=4, zero_lower=True)
+        target, avoid = m.states_labelled("goal"), m.states_labelled("bad")
+        problem = Problem(m, Specification(ReachAvoid(target, avoid)))
+        alg = ValueIteration(certified=certified)
+        monkeypatch.setattr(solve_mod, "GUESS_ENTRIES", 10**12)
+        want = solve(problem, alg)
+        monkeypatch.setattr(solve_mod, "GUESS_ENTRIES", 0)
+        built: list[int] = []
+
+        def counted(*args, built=built):
+            built.append(1)
+            return layout(*args)
+
+        monkeypatch.setattr(solve_module, "sweep_layout", counted)
+        got = solve(problem, alg)
+        monkeypatch.setattr(solve_module, "sweep_layout", layout)
+        for field in ("values", "strategy", "lower", "upper", "fixed"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+        assert got.iterations == want.iterations
+        wrong = bool((want.fixed & (want.values == 1.0) & ~target).any())
+        # built anew after the search only where the guess was wrong
+        assert len(built) == wrong
+        outcomes.add(wrong)
+    assert outcomes == {False, True}

@@ -1,0 +1,80 @@
+"""Action elimination for the sweeps of a maximising strategy, compiled: a bound on a row's
+value from its value when last evaluated and how far the values rose since.
+
+The robust expectation ``Q_r(V) = min/max_{p in P_r} sum_j p_j V(s_j)`` is monotone in
+``V`` and 1-Lipschitz in the maximum norm (every ``p`` sums to 1), so
+``Q_r(V') <= Q_r(V) + max_s (V'(s) - V(s))``. The sweeps keep ``c``, the sum of every
+sweep's residual and of every rise of the values between sweeps (:func:`rise_since`), and
+per row ``qbase = Q_r(V) - c`` when last evaluated: ``qbase + c`` (now) bounds the row's
+value, and a row whose bound is below its state's best value found cannot beat or tie it
+(:func:`planner.imdp.kernels.sweeps.gauss_seidel_sweep`, :func:`bounded_row_values`).
+"""
+
+from __future__ import annotations
+
+import numba
+
+from planner.imdp.kernels.rows import scratch, sorted_value, threshold_value
+
+SKIP_MARGIN = 1e-12
+"""Added to the bound of a skipped row: above the rounding of its two evaluations (at
+most ``(8k + 16)`` units each, :func:`planner.imdp.kernels.rows.below`, about 2e-14 for
+rows of 25 entries), so that skipping never changes a value or a best row."""
+
+
+@numba.njit(cache=True, nogil=True)
+def bounded_row_values(
+    first,
+    last,
+    out,
+    state_rows,
+    best_row,
+    qbase,
+    c_now,
+    slack,
+    row_ptr,
+    remaining,
+    succ,
+    lower,
+    gap,
+    crit,
+    v,
+    adversary_minimizes,
+) -> None:
+    """:func:`planner.imdp.kernels.rows.all_row_values` for the rows of the layout states
+    ``first:last``, except that a row whose bound from its last value (``qbase + c_now``,
+    as in :func:`gauss_seidel_sweep`) is below the value of its state's ``best_row`` by
+    more than ``slack`` gets that bound instead: at least its value, and still below the
+    best by more than ``slack``."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    idx, keys = scratch(row_ptr)
+    rise = c_now + SKIP_MARGIN
+    for k in range(first, last):
+        arg = best_row[k]
+        best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+        if best != best:
+            best = sorted_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+        out[arg] = best
+        for r in range(state_rows[k], state_rows[k + 1]):
+            if r == arg:
+                continue
+            q = qbase[r] + rise
+            if q < best - slack:
+                out[r] = q
+                continue
+            q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if q != q:
+                q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+            out[r] = q
+
+
+@numba.njit(cache=True, nogil=True)
+def rise_since(v, last) -> float:
+    """``max(0, max_i v[i] - last[i])``, with ``last`` then set to ``v``."""
+    rise = 0.0
+    for i in range(v.size):
+        d = v[i] - last[i]
+        if d > rise:
+            rise = d
+        last[i] = v[i]
+    return rise
