@@ -13,6 +13,7 @@ value, and a row whose bound is below its state's best value found cannot beat o
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 from planner.imdp.kernels.rows import scratch, sorted_value, threshold_value
 
@@ -20,6 +21,17 @@ SKIP_MARGIN = 1e-12
 """Added to the bound of a skipped row: above the rounding of its two evaluations (at
 most ``(8k + 16)`` units each, :func:`planner.imdp.kernels.rows.below`, about 2e-14 for
 rows of 25 entries), so that skipping never changes a value or a best row."""
+
+C_ROUNDING = 8 * 2.0**-53
+"""Times ``c``, added to the bound too: the rounding of ``qbase = q - c`` and of
+``qbase + c`` (an ulp of ``c`` each; ``c`` itself never falls below the sum of the rises,
+:func:`rose`)."""
+
+
+def rose(c: float, rise: float) -> float:
+    """``c + rise`` rounded up (one ulp above the float sum): however many rises are added,
+    ``c`` stays at least their exact sum."""
+    return float(np.nextafter(c + rise, np.inf))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -48,7 +60,7 @@ def bounded_row_values(
     best by more than ``slack``."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
-    rise = c_now + SKIP_MARGIN
+    rise = c_now + SKIP_MARGIN + C_ROUNDING * c_now
     for k in range(first, last):
         arg = best_row[k]
         best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)

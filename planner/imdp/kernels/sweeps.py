@@ -20,7 +20,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner._util.threads import concurrently, in_halves
-from planner.imdp.kernels.elimination import SKIP_MARGIN, bounded_row_values, rise_since
+from planner.imdp.kernels.elimination import (
+    C_ROUNDING,
+    SKIP_MARGIN,
+    bounded_row_values,
+    rise_since,
+    rose,
+)
 from planner.imdp.kernels.rows import (
     all_row_values,
     below,
@@ -114,7 +120,7 @@ def gauss_seidel_sweep(
                 best = sorted_value(
                     arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                 )
-            rise = c_now + residual + SKIP_MARGIN
+            rise = c_now + residual + SKIP_MARGIN + C_ROUNDING * c_now
             if has_base:
                 qbase[arg] = best - c_now
             for r in range(lo, hi):
@@ -268,7 +274,7 @@ class ReachSweeper:
         if self._last.size != v.size:
             self._last = v.copy()
         else:
-            self._rise += rise_since(v, self._last)
+            self._rise = rose(self._rise, rise_since(v, self._last))
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
             residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
@@ -295,7 +301,7 @@ class ReachSweeper:
                     self._rise,
                 )
             )
-        self._rise += residual
+        self._rise = rose(self._rise, residual)
         return residual
 
     def _full_sweep(self, v: np.ndarray, layout: tuple, bound: np.ndarray) -> float:
@@ -431,7 +437,7 @@ class ReachSweeper:
         layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
         bounded = slack is not None and self._qbase.size > 0 and self._last.size == v.size
         if bounded:
-            self._rise += rise_since(v, self._last)
+            self._rise = rose(self._rise, rise_since(v, self._last))
             work = self.row_ptr[self.state_rows]
             args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
 

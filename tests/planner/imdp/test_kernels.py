@@ -556,3 +556,23 @@ def test_skipping_rows_by_their_last_values_changes_no_sweep(seed, monkeypatch):
     np.testing.assert_array_equal(qb[near], q[near])
     assert (qb[~near] >= q[~near] - 1e-15).all() and (qb[~near] < best[~near] - slack).all()
     assert (~near).sum() > 0 and (qb[~near] != q[~near]).any()
+
+
+def test_the_sum_of_rises_never_falls_below_the_exact_sum():
+    """``rose`` rounds every addition up, so the skipping bound's ``c`` stays at least the
+    exact sum of the rises however many are added (a float sum falls below it)."""
+    from fractions import Fraction
+
+    from planner.imdp.kernels.elimination import rose
+
+    rng = np.random.default_rng(0)
+    rises = rng.random(20_000) * 10.0 ** rng.uniform(-17, 0, 20_000)
+    c, plain, exact = 0.0, 0.0, Fraction(0)
+    below = 0
+    for r in rises:
+        c = rose(c, float(r))
+        plain += float(r)
+        exact += Fraction(float(r))
+        assert Fraction(c) >= exact
+        below += Fraction(plain) < exact
+    assert below > 0
