@@ -168,12 +168,24 @@ def optimal_slack(tol: float) -> float:
     return max(10 * tol, 1e-12)
 
 
+def state_best(q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool) -> np.ndarray:
+    """Per row (values ``q``, states ``rs`` in runs starting at ``seg``) its state's best
+    value."""
+    return (np.maximum if maximize else np.minimum).reduceat(q, seg)[run_ids(rs)]
+
+
 def optimal_rows(
-    q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool, tol: float
+    q: np.ndarray,
+    seg: np.ndarray,
+    rs: np.ndarray,
+    maximize: bool,
+    tol: float,
+    best: np.ndarray | None = None,
 ) -> np.ndarray:
     """Indices of the rows (values ``q``, states ``rs`` in runs starting at ``seg``)
-    within :func:`optimal_slack` of their state's best: the rows that count as optimal."""
-    best = (np.maximum if maximize else np.minimum).reduceat(q, seg)[run_ids(rs)]
+    within :func:`optimal_slack` of their state's best (``best``, per row, if known): the
+    rows that count as optimal."""
+    best = state_best(q, seg, rs, maximize) if best is None else best
     return np.flatnonzero(np.abs(q - best) <= optimal_slack(tol))
 
 
@@ -225,10 +237,10 @@ def strategy_rows(
     if free_rows.size == 0:
         return choice
     rs = m.row_state[free_rows]
-    opt_local = optimal_rows(q_free, seg, rs, maximize, tol)
+    best = state_best(q_free, seg, rs, maximize)
+    opt_local = optimal_rows(q_free, seg, rs, maximize, tol, best)
     # the greedy rows: the first of each state's best (exactly; the others that count as
     # optimal may be short of it by up to the slack at every step)
-    best = (np.maximum if maximize else np.minimum).reduceat(q_free, seg)[run_ids(rs)]
     top = np.flatnonzero(q_free == best)
     greedy = top[first_of_runs(rs[top])]
     choice[rs[greedy]] = free_rows[greedy]

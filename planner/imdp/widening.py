@@ -177,9 +177,9 @@ def certified_upper(
     bound as it is is checked first and kept if shown within the tolerance: the widening
     is a raise that speeds the exact check, no proof. Where the widening searches for
     short stays (closed bracket, maximising, at most ``SI_MAX_STATES`` free states), the
-    bound raised uniformly (:func:`uniformly_widened`) is checked
-    here meanwhile, kept if shown within the tolerance, and the search stopped (the random
-    100k-state benchmark model has no such search: checking it there cost 0.1-0.2 s)."""
+    bound raised uniformly (:func:`uniformly_widened`) is checked here meanwhile, kept if
+    shown within the tolerance, and the search stopped (the random 100k-state benchmark
+    model has no such search: checking it there cost 0.1-0.2 s)."""
     sides = (maximize, adversary_minimizes)
     widening = (m, free_rows, lower, upper, adversary_minimizes, maximize)
 

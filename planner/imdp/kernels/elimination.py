@@ -28,6 +28,14 @@ C_ROUNDING = 8 * 2.0**-53
 :func:`rose`)."""
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def rise_bound(c_now: float) -> float:
+    """How far a row's value may have risen since its ``qbase`` was stored, with ``c_now``
+    the sum of rises now: ``c_now`` plus ``SKIP_MARGIN`` and ``C_ROUNDING * c_now``
+    (``qbase + rise_bound(c_now)`` bounds the row's value)."""
+    return c_now + SKIP_MARGIN + C_ROUNDING * c_now
+
+
 def rose(c: float, rise: float) -> float:
     """``c + rise`` rounded up (one ulp above the float sum): however many rises are added,
     ``c`` stays at least their exact sum."""
@@ -60,7 +68,7 @@ def bounded_row_values(
     best by more than ``slack``."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
-    rise = c_now + SKIP_MARGIN + C_ROUNDING * c_now
+    rise = rise_bound(c_now)
     for k in range(first, last):
         arg = best_row[k]
         best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)

@@ -63,7 +63,9 @@ def attractor(
     scratch = np.empty(longest + 1)
     tail = 0
     if not every_row:
-        _forward_passes(x, choice, cand, row_state, row_ptr, successor, lower, upper, forced)
+        _forward_passes(
+            x, choice, cand, row_state, row_ptr, successor, lower, upper, forced, terms, scratch
+        )
     for r in range(n_rows):
         if not cand[r] or x[row_state[r]]:
             continue
@@ -120,7 +122,9 @@ def attractor(
 
 
 @numba.njit(cache=True, nogil=True)
-def _forward_passes(x, choice, cand, row_state, row_ptr, successor, lower, upper, forced):
+def _forward_passes(
+    x, choice, cand, row_state, row_ptr, successor, lower, upper, forced, terms, scratch
+):
     """The start of :func:`attractor` for a controller that wants to get there: passes over
     the candidate rows of the states outside ``x`` in index order, a state joining (in
     ``x``, with its ``choice``) as soon as a row of it leads into the set as it stands, a
@@ -130,11 +134,9 @@ def _forward_passes(x, choice, cand, row_state, row_ptr, successor, lower, upper
     work list's, from the set the passes reached (on the random 100k-state benchmark
     model nearly every state joins in the first two passes, at a few entries each, where
     the work list alone walks all 7.2M entries twice; on a grid whose targets lie in a
-    corner the first pass ends after ``_PASS_CHECK`` states)."""
+    corner the first pass ends after ``_PASS_CHECK`` states). ``terms``, ``scratch``: the
+    attractor's scratch arrays for :func:`_outside_below_one`."""
     n_rows = row_ptr.size - 1
-    longest = longest_row(row_ptr)
-    terms = np.empty(longest + 1)
-    scratch = np.empty(longest + 1)
     while True:
         scanned = 0
         joined = 0

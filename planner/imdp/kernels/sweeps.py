@@ -20,13 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner._util.threads import concurrently, in_halves
-from planner.imdp.kernels.elimination import (
-    C_ROUNDING,
-    SKIP_MARGIN,
-    bounded_row_values,
-    rise_since,
-    rose,
-)
+from planner.imdp.kernels.elimination import bounded_row_values, rise_bound, rise_since, rose
 from planner.imdp.kernels.rows import (
     all_row_values,
     below,
@@ -90,8 +84,8 @@ def gauss_seidel_sweep(
     above (:mod:`planner.imdp.kernels.elimination`): per layout row its value when last
     evaluated less ``c_now`` then, where ``c_now`` (kept by :meth:`ReachSweeper.sweep`)
     sums every sweep's residual and every rise of the values between sweeps; a row whose
-    ``qbase + c_now + r`` (``r`` this sweep's residual so far) plus ``SKIP_MARGIN`` is
-    below the best value found so far is skipped. ``last`` (empty: none) receives every
+    ``qbase + rise_bound(c_now) + r`` (``r`` this sweep's residual so far) is below the
+    best value found so far is skipped. ``last`` (empty: none) receives every
     value written, for the rise between sweeps.
     """
     sign = 1.0 if adversary_minimizes else -1.0
@@ -120,7 +114,7 @@ def gauss_seidel_sweep(
                 best = sorted_value(
                     arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                 )
-            rise = c_now + residual + SKIP_MARGIN + C_ROUNDING * c_now
+            rise = rise_bound(c_now) + residual
             if has_base:
                 qbase[arg] = best - c_now
             for r in range(lo, hi):
@@ -271,10 +265,7 @@ class ReachSweeper:
         of the passes from above, is below the best found are skipped; from
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
         the best rows of the last full sweep."""
-        if self._last.size != v.size:
-            self._last = v.copy()
-        else:
-            self._rise = rose(self._rise, rise_since(v, self._last))
+        self._track(v)
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
             residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
@@ -304,6 +295,14 @@ class ReachSweeper:
         self._rise = rose(self._rise, residual)
         return residual
 
+    def _track(self, v: np.ndarray) -> None:
+        """The rise of ``v`` since the values after the last sweep added to the sum of rises
+        (the first call only keeps ``v``)."""
+        if self._last.size != v.size:
+            self._last = v.copy()
+        else:
+            self._rise = rose(self._rise, rise_since(v, self._last))
+
     def _full_sweep(self, v: np.ndarray, layout: tuple, bound: np.ndarray) -> float:
         """A full :func:`gauss_seidel_sweep`; from ``HALVES_SWEEP_ENTRIES`` entries on a
         block Gauss-Seidel sweep of two halves of the states in sweep order (about equal
@@ -311,8 +310,8 @@ class ReachSweeper:
         that holds the earlier half's values as they were before the sweep, its values then
         copied into ``v``. Every value read is a lower bound, so every update is one, and
         the result does not depend on the threads' timing."""
-        sides = (True, self.maximize, self.adversary_minimizes, bound, self._qbase, self._last)
-        sides = (*sides, self._rise)
+        elimination = (bound, self._qbase, self._last, self._rise)
+        sides = (True, self.maximize, self.adversary_minimizes, *elimination)
         st, rows, best = self.states, self.state_rows, self.best_row
         cut = self._cut
         if cut == 0:
@@ -437,7 +436,7 @@ class ReachSweeper:
         layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
         bounded = slack is not None and self._qbase.size > 0 and self._last.size == v.size
         if bounded:
-            self._rise = rose(self._rise, rise_since(v, self._last))
+            self._track(v)
             work = self.row_ptr[self.state_rows]
             args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
 

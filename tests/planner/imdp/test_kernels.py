@@ -500,7 +500,9 @@ def test_attractor_after_a_forward_pass_that_does_not_pay(seed):
     # the passes alone stop far short: the work list found most of it
     passed = start.copy()
     arrays = (m.row_state, m.row_ptr, m.successor, m.lower, m.upper)
-    search._forward_passes(passed, np.full(m.n_states, -1), cand, *arrays, True)
+    width = int(np.diff(m.row_ptr).max()) + 1
+    scratch = (np.empty(width), np.empty(width))
+    search._forward_passes(passed, np.full(m.n_states, -1), cand, *arrays, True, *scratch)
     assert passed.sum() < x.sum() // 2
     joined = start.copy()
     pending = np.flatnonzero(x & ~start)
