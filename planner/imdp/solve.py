@@ -60,7 +60,7 @@ from planner._util.threads import concurrently
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.discounted import discounted_values
-from planner.imdp.kernels import ReachSweeper
+from planner.imdp.kernels import ReachSweeper, layers
 from planner.imdp.minimal import dual_reach, unavoidable_reach
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
@@ -74,7 +74,7 @@ from planner.imdp.problem import (
     ValueIteration,
     resolve_states,
 )
-from planner.imdp.reachability import reach_values, sweep_layout
+from planner.imdp.reachability import reach_values
 from planner.imdp.strategy import strategy_actions
 from planner.modes import Adversary, Objective
 
@@ -109,9 +109,8 @@ def _settled(
     minimising one's way to stay clear of it at its value-0 states. ``target_closed``:
     the target holds every state that reaches it almost surely, so the probability-1
     search is skipped. Worst case maximising, on large models, the sweeps' layout is
-    built on a second thread while that search runs, for the settled states as they will
-    be if it finds no state outside the target; ``guessed`` is that layout where the guess
-    came true, else ``None``."""
+    built on a second thread while the searches run (:func:`_guessed_layout`); ``guessed``
+    is that layout where the guess came true, else ``None``."""
     n = m.n_states
     target = resolve_states(m, prop.target, "target")
     avoid = (
@@ -125,23 +124,26 @@ def _settled(
     if not precompute:
         zero = np.zeros(n, dtype=bool)
     elif maximize and pessimistic:
-        pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
-        if not target_closed:
 
-            def almost_sure() -> tuple[np.ndarray, np.ndarray]:
-                return graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
+        def searches() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            pos, _ = graph.robust_positive_reach(m, target, avoid, rows)
+            if target_closed:
+                return pos, prob1, choice
+            return pos, *graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
 
-            def guess() -> ReachSweeper:
-                free = np.flatnonzero(rows & (pos & ~target & ~avoid)[m.row_state])
-                return sweep_layout(m, free, np.where(target, 1.0, 0.0), True, True)
-
-            if m.n_entries < GUESS_ENTRIES:
-                prob1, choice = almost_sure()
-            else:
-                guessed, (prob1, choice) = concurrently(guess, almost_sure, "layout")
-                if np.any(prob1 & ~target):
-                    guessed = None
-            choice = np.where(prob1, choice, -1)
+        if m.n_entries < GUESS_ENTRIES:
+            pos, prob1, choice = searches()
+        else:
+            m.reverse_index()  # built once, before both threads read it
+            (free, guessed), (pos, prob1, choice) = concurrently(
+                lambda: _guessed_layout(m, rows, target, avoid), searches, "layout"
+            )
+            settles = pos & ~target & ~avoid
+            if np.any(prob1 & ~target) or not np.array_equal(
+                free, np.flatnonzero(rows & settles[m.row_state])
+            ):
+                guessed = None
+        choice = np.where(prob1, choice, -1)
         zero = ~pos
     elif maximize:
         zero = ~graph.possible_reach(m, target, avoid, rows)
@@ -162,10 +164,25 @@ def _settled(
 
 GUESS_ENTRIES = 100_000
 """Entries of a model from which the sweeps' layout is built on a second thread while the
-probability-1 search runs (:func:`_settled`'s ``guess``), as if that search found no
-state outside the target (it finds none on the benchmarks of ``benchmarks/bench_vi.py``:
-the layout's 0.025-0.045 s then overlap the search's 0.015-0.025 s); where it finds
-some, the layout is built anew."""
+graph searches of the settled states run (:func:`_guessed_layout`); where the guess fails,
+the layout is built anew after them."""
+
+
+def _guessed_layout(
+    m: IMDP, rows: np.ndarray, target: np.ndarray, avoid: np.ndarray
+) -> tuple[np.ndarray, ReachSweeper]:
+    """The sweeps' layout (:func:`planner.imdp.kernels.sweeps.sweep_layout`), with its free
+    rows, as if the free states were those that can reach the target at all (a path of
+    ``upper > 0`` entries avoiding ``avoid``) and no state outside the target had value 1.
+    The guess holds where every such state reaches the target with positive probability
+    against every adversary and none almost surely: on the benchmarks of
+    ``benchmarks/bench_vi.py`` (grid seeds 0-2 and the random model), where the layout
+    then overlaps both searches instead of following the first."""
+    candidates = np.flatnonzero(rows & ~(target | avoid)[m.row_state])
+    dist = layers(m, candidates, target)
+    reach = np.isfinite(dist) & ~target
+    free = candidates[reach[m.row_state[candidates]]]
+    return free, ReachSweeper(m, free, dist, True, True)
 
 
 def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np.ndarray):

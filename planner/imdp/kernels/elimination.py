@@ -7,7 +7,7 @@ The robust expectation ``Q_r(V) = min/max_{p in P_r} sum_j p_j V(s_j)`` is monot
 sweep's residual and of every rise of the values between sweeps (:func:`rise_since`), and
 per row ``qbase = Q_r(V) - c`` when last evaluated: ``qbase + c`` (now) bounds the row's
 value, and a row whose bound is below its state's best value found cannot beat or tie it
-(:func:`planner.imdp.kernels.sweeps.gauss_seidel_sweep`, :func:`bounded_row_values`).
+(:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`, :func:`bounded_row_values`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
-"""Gauss-Seidel sweeps of robust value iteration, compiled, and the sweep-ordered layout
-they run on (:class:`ReachSweeper`).
-
-A Gauss-Seidel sweep is sequential by nature: every state's update reads the values that
-the states before it in the sweep have just written. Array operations can only do that
-layer by layer (Jacobi inside a layer); these kernels do it state by state.
+"""The sweep-ordered layout that robust value iteration sweeps (:class:`ReachSweeper`) and
+its sweeps: Gauss-Seidel sweeps from below
+(:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`) and passes from above
+(:func:`planner.imdp.kernels.upper.upper_sweep`).
 
 Layout (built by :class:`ReachSweeper`): the free states in sweep order, their rows
 (``state_rows[k]:state_rows[k + 1]`` are the rows of the ``k``-th state) and, per row, its
@@ -15,145 +13,22 @@ from __future__ import annotations
 
 import copy
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 
 from planner._util.threads import concurrently, in_halves
-from planner.imdp.kernels.elimination import bounded_row_values, rise_bound, rise_since, rose
+from planner.imdp.kernels.elimination import bounded_row_values, rise_since, rose
+from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep
 from planner.imdp.kernels.rows import (
     all_row_values,
-    below,
     fill_layout,
     gather_rows,
     patch_rows,
     row_distributions,
-    scratch,
-    sorted_value,
-    threshold_value,
 )
 from planner.imdp.kernels.search import layers
 from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
-
-
-@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
-def gauss_seidel_sweep(
-    states,
-    state_rows,
-    row_ptr,
-    remaining,
-    succ,
-    lower,
-    gap,
-    crit,
-    v,
-    best_row,
-    full,
-    maximize,
-    adversary_minimizes,
-    bound,
-    qbase,
-    last,
-    c_now,
-) -> float:
-    """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
-    ``states`` in order, in place; returns ``max_s`` of the change.
-
-    ``opt`` is max (``maximize``) or min over the state's rows; the adversary minimises
-    (``adversary_minimizes``) or maximises. Each update reads the values written earlier in
-    the same sweep. ``full``: every row is evaluated and ``best_row[k]`` records the optimal
-    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: for
-    a maximising strategy its update is at most the full one). Iterating from below
-    (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
-    sound lower bound; each update is lowered by its rounding bound
-    (:func:`planner.imdp.kernels.rows.below`) so that this holds in floating point too.
-    Compiled with reassociation allowed (``fastmath={"reassoc"}``, no other fast-math
-    assumption: the ``nan`` of a moved critical successor is still tested): the row sums
-    then run as parallel partial sums, 25-30 % faster on the 100 x 100 benchmark grid's
-    rows of 9-25 entries, and that rounding bound holds for any order of the sums.
-
-    ``bound`` (full sweeps of a maximising strategy; empty: none): per layout row a value
-    at least the row's value at every ``V`` swept (the row cache of the passes from above,
-    :func:`upper_sweep`, which holds row values at upper bounds). The last best row is
-    evaluated first, and a row whose bound is below the best value found so far is skipped:
-    it can neither beat nor tie it, so values and best rows are those of the full sweep
-    (action elimination).
-
-    ``qbase`` (a maximising strategy; empty: none) does the same without a bound from
-    above (:mod:`planner.imdp.kernels.elimination`): per layout row its value when last
-    evaluated less ``c_now`` then, where ``c_now`` (kept by :meth:`ReachSweeper.sweep`)
-    sums every sweep's residual and every rise of the values between sweeps; a row whose
-    ``qbase + rise_bound(c_now) + r`` (``r`` this sweep's residual so far) is below the
-    best value found so far is skipped. ``last`` (empty: none) receives every
-    value written, for the rise between sweeps.
-    """
-    sign = 1.0 if adversary_minimizes else -1.0
-    idx, keys = scratch(row_ptr)
-    residual = 0.0
-    has_bound = bound.size > 0
-    has_base = qbase.size > 0
-    prune = full and maximize and (has_bound or has_base)
-    track = last.size > 0
-    for k in range(states.size):
-        s = states[k]
-        if full:
-            lo = state_rows[k]
-            hi = state_rows[k + 1]
-        else:
-            lo = best_row[k]
-            hi = lo + 1
-        best = -np.inf if maximize else np.inf
-        arg = lo
-        if prune and hi - lo > 1:
-            # the last best row first; a row whose bound is below the best so far can
-            # neither beat nor tie it
-            arg = best_row[k]
-            best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-            if best != best:
-                best = sorted_value(
-                    arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                )
-            rise = rise_bound(c_now) + residual
-            if has_base:
-                qbase[arg] = best - c_now
-            for r in range(lo, hi):
-                if r == arg or (has_bound and bound[r] < best):
-                    continue
-                if has_base and qbase[r] + rise < best:
-                    continue
-                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-                if q != q:
-                    q = sorted_value(
-                        r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                    )
-                if has_base:
-                    qbase[r] = q - c_now
-                if q > best or (q == best and r < arg):
-                    best = q
-                    arg = r
-        else:
-            for r in range(lo, hi):
-                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-                if q != q:
-                    q = sorted_value(
-                        r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                    )
-                if (q > best) if maximize else (q < best):
-                    best = q
-                    arg = r
-        if full:
-            best_row[k] = arg
-        old = v[s]
-        best = below(best, arg, row_ptr)
-        if best > old:
-            v[s] = best
-            if track:
-                last[s] = best
-            if best - old > residual:
-                residual = best - old
-    return residual
-
 
 ELIMINATE = True
 """Full sweeps of a maximising strategy skip rows by their last values
@@ -174,6 +49,14 @@ the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
 _NO_INDEX = np.empty(0, dtype=np.int64)
+_NO_LIGHT = (
+    np.zeros(1, dtype=np.int64),
+    np.empty(0),
+    _NO_INDEX,
+    np.empty(0),
+    np.empty(0),
+    _NO_INDEX,
+)
 
 
 class ReachSweeper:
@@ -253,6 +136,7 @@ class ReachSweeper:
         # gauss_seidel_sweep): per layout row its last value less the rise then, the
         # values after the last sweep, and the rise of the values since the first sweep
         self._qbase = np.full(rows.size, np.inf) if self.maximize and ELIMINATE else self._no_cache
+        self._qmax = np.full(self.states.size if self._qbase.size else 0, np.inf)
         self._last = self._no_cache
         self._rise = 0.0
         # the first state of the later half of a full sweep in halves (0: whole)
@@ -288,8 +172,12 @@ class ReachSweeper:
                     self.adversary_minimizes,
                     self._no_cache,
                     self._no_cache,
+                    self._no_cache,
                     self._last,
                     self._rise,
+                    _NO_LIGHT,
+                    _NO_INDEX,
+                    0,
                 )
             )
         self._rise = rose(self._rise, residual)
@@ -310,16 +198,43 @@ class ReachSweeper:
         that holds the earlier half's values as they were before the sweep, its values then
         copied into ``v``. Every value read is a lower bound, so every update is one, and
         the result does not depend on the threads' timing."""
-        elimination = (bound, self._qbase, self._last, self._rise)
-        sides = (True, self.maximize, self.adversary_minimizes, *elimination)
-        st, rows, best = self.states, self.state_rows, self.best_row
+        sides = (True, self.maximize, self.adversary_minimizes, bound, self._qbase)
+        st, rows, best, top = self.states, self.state_rows, self.best_row, self._qmax
+        light, slots = (self._light, self._light_rows) if self._light else (_NO_LIGHT, _NO_INDEX)
+        tail = (self._last, self._rise, light)
         cut = self._cut
         if cut == 0:
-            return float(gauss_seidel_sweep(st, rows, *layout, v, best, *sides))
+            return float(
+                gauss_seidel_sweep(st, rows, *layout, v, best, *sides, top, *tail, slots, 0)
+            )
         later = v.copy()
+        top_later, top_first = (top[cut:], top[:cut]) if top.size else (top, top)
+        slots_later, slots_first = (slots[cut:], slots[:cut]) if slots.size else (slots, slots)
         rest, first = concurrently(
-            lambda: gauss_seidel_sweep(st[cut:], rows[cut:], *layout, later, best[cut:], *sides),
-            lambda: gauss_seidel_sweep(st[:cut], rows[: cut + 1], *layout, v, best[:cut], *sides),
+            lambda: gauss_seidel_sweep(
+                st[cut:],
+                rows[cut:],
+                *layout,
+                later,
+                best[cut:],
+                *sides,
+                top_later,
+                *tail,
+                slots_later,
+                cut,
+            ),
+            lambda: gauss_seidel_sweep(
+                st[:cut],
+                rows[: cut + 1],
+                *layout,
+                v,
+                best[:cut],
+                *sides,
+                top_first,
+                *tail,
+                slots_first,
+                0,
+            ),
             "sweep",
         )
         v[st[cut:]] = later[st[cut:]]

@@ -420,7 +420,19 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
         later = v.copy()
         layout = (ref.row_ptr, ref.remaining, ref.succ, ref.lower, ref.gap, ref.crit)
         none = np.empty(0)
-        sides = (True, True, True, none, none, none, 0.0)
+        sides = (
+            True,
+            True,
+            True,
+            none,
+            none,
+            none,
+            none,
+            0.0,
+            sweeps._NO_LIGHT,
+            sweeps._NO_INDEX,
+            0,
+        )
         st, rows, best = ref.states, ref.state_rows, ref.best_row
         r0 = gauss_seidel_sweep(st[:cut], rows[: cut + 1], *layout, want, best[:cut], *sides)
         r1 = gauss_seidel_sweep(st[cut:], rows[cut:], *layout, later, best[cut:], *sides)
@@ -578,3 +590,49 @@ def test_the_sum_of_rises_never_falls_below_the_exact_sum():
         assert Fraction(c) >= exact
         below += Fraction(plain) < exact
     assert below > 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_full_sweeps_read_the_best_rows_from_the_light_copy(seed):
+    """A full sweep that evaluates each state's last best row from the light sweeps'
+    contiguous copy gives the values and best rows of one that reads the full layout (up to
+    the rounding of an equally valid critical successor), and copies the critical
+    successor back so that a patched light layout still equals a fresh gather."""
+    from planner.imdp.kernels import gauss_seidel_sweep
+    from planner.imdp.kernels.rows import gather_rows
+
+    rng = np.random.default_rng(400 + seed)
+    m = random_imdp(rng, n_states=150, n_actions=4, max_succ=6, zero_lower=bool(seed % 2))
+    sw = _sweeper(m, bool(seed < 2))
+    v = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    for step in range(6):
+        sw.sweep(v, step % 3 == 0)
+    assert sw._light is not None
+    layout = (sw.row_ptr, sw.remaining, sw.succ, sw.lower, sw.gap)
+    none = np.empty(0)
+    results = []
+    for use_light in (False, True):
+        vv, crit, best = v.copy(), sw.crit.copy(), sw.best_row.copy()
+        light = tuple(a.copy() for a in sw._light)
+        slots = sw._light_rows.copy() if use_light else sweeps._NO_INDEX
+        args = (
+            sw.states,
+            sw.state_rows,
+            *layout,
+            crit,
+            vv,
+            best,
+            True,
+            True,
+            sw.adversary_minimizes,
+        )
+        none4 = (none, none, none, none, 0.0)
+        r = gauss_seidel_sweep(*args, *none4, light if use_light else sweeps._NO_LIGHT, slots, 0)
+        results.append((r, vv, best, crit, light))
+    (r0, v0, b0, _, _), (r1, v1, b1, crit1, light1) = results
+    np.testing.assert_allclose(v1, v0, rtol=0.0, atol=1e-15)
+    np.testing.assert_array_equal(b1, b0)
+    assert abs(r1 - r0) <= 1e-15 and r1 > 0.0
+    # the copied-back critical successors are those of the light copy
+    fresh = gather_rows(sw._light_rows, *layout, crit1)
+    np.testing.assert_array_equal(fresh[5], light1[5])
