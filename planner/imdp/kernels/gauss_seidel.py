@@ -11,8 +11,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.elimination import rise_bound
-from planner.imdp.kernels.rows import below, scratch, sorted_value, threshold_value
+from planner.imdp.kernels.elimination import SKIP_MARGIN, rise_bound
+from planner.imdp.kernels.rows import (
+    below,
+    feasible_bound,
+    scratch,
+    sorted_value,
+    threshold_value,
+)
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
@@ -38,6 +44,7 @@ def gauss_seidel_sweep(
     light,
     light_rows,
     light_off,
+    bound_skip,
 ) -> float:
     """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
     ``states`` in order, in place; returns ``max_s`` of the change.
@@ -73,6 +80,14 @@ def gauss_seidel_sweep(
     looked at (late in a solve most states; the same values and best rows). ``last``
     (empty: none) receives every value written, for the rise between sweeps.
 
+    A row sorted anew (:func:`sorted_value`) is evaluated again by :func:`threshold_value`
+    at the critical successor just found, so that every row value comes from the one
+    formula compiled here: a row's value then does not depend on whether its stored
+    critical successor still stood or was found anew, so sweeps that skip rows (leaving
+    theirs stale) give the values of sweeps that do not, to the last bit (``sorted_value``
+    sums in another order, and as a function called from several kernels its compiled
+    variant depends on which was called first).
+
     ``light`` (full sweeps; ``light_rows`` empty: none): the contiguous copy of one row
     per state that light sweeps read (:func:`planner.imdp.kernels.rows.gather_rows`), its
     slot ``k + light_off`` a copy of the row ``light_rows[k]``. That row is evaluated from
@@ -89,6 +104,7 @@ def gauss_seidel_sweep(
     has_top = has_base and qmax.size > 0
     l_ptr, l_rem, l_succ, l_lower, l_gap, l_crit = light
     prune = full and maximize and (has_bound or has_base)
+    bound_skip = bound_skip and adversary_minimizes
     track = last.size > 0
     for k in range(states.size):
         s = states[k]
@@ -112,6 +128,8 @@ def gauss_seidel_sweep(
                 lq = sorted_value(
                     j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit, idx, keys
                 )
+                again = threshold_value(j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
+                lq = again if again == again else lq
             crit[lrow] = row_ptr[lrow] + l_crit[j] - l_ptr[j]
         if prune and hi - lo > 1:
             # the last best row first; a row whose bound is below the best so far can
@@ -125,6 +143,10 @@ def gauss_seidel_sweep(
                     best = sorted_value(
                         arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                     )
+                    again = threshold_value(
+                        arg, row_ptr, remaining, succ, lower, gap, v, sign, crit
+                    )
+                    best = again if again == again else best
             rise = rise_bound(c_now) + residual
             if has_base:
                 qbase[arg] = best - c_now
@@ -137,9 +159,18 @@ def gauss_seidel_sweep(
                     continue
                 q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                 if q != q:
+                    if bound_skip:
+                        q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
+                        if q + SKIP_MARGIN < best:
+                            # a feasible distribution shows it below the best: not sorted
+                            if has_base:
+                                qbase[r] = q + SKIP_MARGIN - c_now
+                            continue
                     q = sorted_value(
                         r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                     )
+                    again = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                    q = again if again == again else q
                 if has_base:
                     qbase[r] = q - c_now
                 if q > best or (q == best and r < arg):
@@ -161,6 +192,10 @@ def gauss_seidel_sweep(
                         q = sorted_value(
                             r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                         )
+                        again = threshold_value(
+                            r, row_ptr, remaining, succ, lower, gap, v, sign, crit
+                        )
+                        q = again if again == again else q
                 if (q > best) if maximize else (q < best):
                     best = q
                     arg = r

@@ -60,6 +60,45 @@ def threshold_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float
     return sign * (lv + rem * t - short) if holds else np.nan
 
 
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
+def feasible_bound(r: int, row_ptr, remaining, succ, lower, gap, v, crit) -> float:
+    """An expectation at least row ``r``'s value under the minimising adversary, for a row
+    whose critical successor moved (:func:`threshold_value` returned ``nan``), in one pass
+    and no sorting: that of a feasible distribution formed around the stale threshold
+    ``t``. Where the successors below ``t`` can take more than the remaining mass
+    ``rem = 1 - sum(l)``, it is spread over them in proportion to their gaps; else every
+    successor up to ``t`` gets its upper bound and the rest is spread over those above
+    ``t`` in proportion to their gaps; ``inf`` where neither is feasible. The adversary's
+    minimum is below every feasible distribution's expectation; the sums are rounded by a
+    few units in ``1e-16``, which callers cover with a margin."""
+    rem = remaining[r]
+    t = v[succ[crit[r]]]
+    lv = 0.0
+    g_less = 0.0
+    g_eq = 0.0
+    short = 0.0
+    g_all = 0.0
+    gk_all = 0.0
+    for i in range(row_ptr[r], row_ptr[r + 1]):
+        k = v[succ[i]]
+        g = gap[i]
+        lv += lower[i] * k
+        d = t - k
+        below = d > 0.0
+        g_less += g if below else 0.0
+        short += g * d if below else 0.0
+        g_eq += g if d == 0.0 else 0.0
+        g_all += g
+        gk_all += g * k
+    upto = t * g_less - short + t * g_eq  # sum of g k over the successors up to t
+    g_more = g_all - g_less - g_eq
+    if rem > 0.0 and rem <= g_less:
+        return lv + rem * t - short * (rem / g_less)
+    if rem > 0.0 and g_more > 0.0:
+        return lv + upto + (rem - g_less - g_eq) * ((gk_all - upto) / g_more)
+    return np.inf
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def rounding_bound(k: int) -> float:
     """The rounding bound of :func:`below` for a row of ``k`` entries."""
@@ -102,7 +141,13 @@ def sort_entries(a: int, n: int, succ, v, sign: float, idx, keys) -> None:
 def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, crit, idx, keys):
     """Row ``r``'s value by sorting it (an insertion sort into the scratch arrays
     ``idx``/``keys``), its critical entry recorded in ``crit[r]`` for
-    :func:`threshold_value`."""
+    :func:`threshold_value`. The value returned is ``threshold_value``'s at that entry
+    (where its condition holds, as it does but at the edges of rounding), so that a row's
+    value in a kernel compiled like this one (without reassociation) does not depend on
+    whether the row was sorted or its stored critical entry still stood: skipping rows,
+    which leaves theirs stale, changes no value computed after, to the last bit (kernels
+    compiled with reassociation evaluate ``threshold_value`` again themselves,
+    :func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`)."""
     a = row_ptr[r]
     n = row_ptr[r + 1] - a
     sort_entries(a, n, succ, v, sign, idx, keys)
@@ -121,7 +166,8 @@ def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, c
         left -= add
         q += (lower[e] + add) * keys[i]
     crit[r] = c
-    return sign * q
+    again = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+    return again if again == again else sign * q
 
 
 @numba.njit(cache=True, nogil=True)

@@ -31,6 +31,7 @@ from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
 
 ELIMINATE = True
+BOUND_SKIP = True
 """Full sweeps of a maximising strategy skip rows by their last values
 (:func:`gauss_seidel_sweep`'s ``qbase``)."""
 
@@ -178,6 +179,7 @@ class ReachSweeper:
                     _NO_LIGHT,
                     _NO_INDEX,
                     0,
+                    False,
                 )
             )
         self._rise = rose(self._rise, residual)
@@ -201,42 +203,30 @@ class ReachSweeper:
         sides = (True, self.maximize, self.adversary_minimizes, bound, self._qbase)
         st, rows, best, top = self.states, self.state_rows, self.best_row, self._qmax
         light, slots = (self._light, self._light_rows) if self._light else (_NO_LIGHT, _NO_INDEX)
-        tail = (self._last, self._rise, light)
-        cut = self._cut
-        if cut == 0:
-            return float(
-                gauss_seidel_sweep(st, rows, *layout, v, best, *sides, top, *tail, slots, 0)
+
+        def part(first: int, last: int, values: np.ndarray) -> float:
+            # the states first:last of the sweep order, on ``values``
+            return gauss_seidel_sweep(
+                st[first:last],
+                rows[first : last + 1],
+                *layout,
+                values,
+                best[first:last],
+                *sides,
+                top[first:last] if top.size else top,
+                self._last,
+                self._rise,
+                light,
+                slots[first:last] if slots.size else slots,
+                first,
+                BOUND_SKIP,
             )
+
+        cut, n = self._cut, st.size
+        if cut == 0:
+            return float(part(0, n, v))
         later = v.copy()
-        top_later, top_first = (top[cut:], top[:cut]) if top.size else (top, top)
-        slots_later, slots_first = (slots[cut:], slots[:cut]) if slots.size else (slots, slots)
-        rest, first = concurrently(
-            lambda: gauss_seidel_sweep(
-                st[cut:],
-                rows[cut:],
-                *layout,
-                later,
-                best[cut:],
-                *sides,
-                top_later,
-                *tail,
-                slots_later,
-                cut,
-            ),
-            lambda: gauss_seidel_sweep(
-                st[:cut],
-                rows[: cut + 1],
-                *layout,
-                v,
-                best[:cut],
-                *sides,
-                top_first,
-                *tail,
-                slots_first,
-                0,
-            ),
-            "sweep",
-        )
+        rest, first = concurrently(lambda: part(cut, n, later), lambda: part(0, cut, v), "sweep")
         v[st[cut:]] = later[st[cut:]]
         return float(max(rest, first))
 
