@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from planner.imdp.kernels.rows import scratch, sorted_value, threshold_value
+from planner.imdp.kernels.rows import feasible_bound, scratch, sorted_value, threshold_value
 
 SKIP_MARGIN = 1e-12
 """Added to the bound of a skipped row: above the rounding of its two evaluations (at
@@ -65,7 +65,10 @@ def bounded_row_values(
     ``first:last``, except that a row whose bound from its last value (``qbase + c_now``,
     as in :func:`gauss_seidel_sweep`) is below the value of its state's ``best_row`` by
     more than ``slack`` gets that bound instead: at least its value, and still below the
-    best by more than ``slack``."""
+    best by more than ``slack``; so does, against the minimising adversary, a row whose
+    critical successor moved and whose feasible distribution
+    (:func:`planner.imdp.kernels.rows.feasible_bound`, plus ``SKIP_MARGIN``) shows it so,
+    without sorting it."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     rise = rise_bound(c_now)
@@ -83,6 +86,12 @@ def bounded_row_values(
                 out[r] = q
                 continue
             q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if q != q and adversary_minimizes:
+                q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit) + SKIP_MARGIN
+                if q < best - slack:
+                    out[r] = q
+                    continue
+                q = np.nan
             if q != q:
                 q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             out[r] = q
