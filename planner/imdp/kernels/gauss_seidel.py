@@ -44,7 +44,7 @@ def gauss_seidel_sweep(
     light,
     light_rows,
     light_off,
-    bound_skip,
+    bounded,
 ) -> float:
     """One Gauss-Seidel sweep of ``V(s) <- max(V(s), opt_a min/max_p sum p V)`` over
     ``states`` in order, in place; returns ``max_s`` of the change.
@@ -80,6 +80,14 @@ def gauss_seidel_sweep(
     looked at (late in a solve most states; the same values and best rows). ``last``
     (empty: none) receives every value written, for the rise between sweeps.
 
+    ``bounded`` (with ``qbase``, against the minimising adversary; empty: none), a flag
+    per layout row: a row whose critical successor moved is not sorted when a feasible
+    distribution around its stale threshold (:func:`feasible_bound`, one pass) shows it
+    below the best found so far by ``SKIP_MARGIN``; its bound becomes its ``qbase`` and
+    the row is flagged, and while flagged the next sweeps try that bound first (one pass)
+    and evaluate the row exactly only where it no longer skips it. A skipped row cannot
+    beat or tie the best, so values and best rows are those of the sweep without skipping.
+
     A row sorted anew (:func:`sorted_value`) is evaluated again by :func:`threshold_value`
     at the critical successor just found, so that every row value comes from the one
     formula compiled here: a row's value then does not depend on whether its stored
@@ -104,7 +112,7 @@ def gauss_seidel_sweep(
     has_top = has_base and qmax.size > 0
     l_ptr, l_rem, l_succ, l_lower, l_gap, l_crit = light
     prune = full and maximize and (has_bound or has_base)
-    bound_skip = bound_skip and adversary_minimizes
+    bound_skip = bounded.size > 0 and adversary_minimizes and has_base
     track = last.size > 0
     for k in range(states.size):
         s = states[k]
@@ -157,14 +165,22 @@ def gauss_seidel_sweep(
                     continue
                 if has_base and qbase[r] + rise < best:
                     continue
+                if bound_skip and bounded[r]:
+                    # skipped by its bound before, its critical successor left stale: the
+                    # bound again in one pass, exact values only where it fails
+                    q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
+                    if q + SKIP_MARGIN < best:
+                        qbase[r] = q + SKIP_MARGIN - c_now
+                        continue
+                    bounded[r] = False
                 q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                 if q != q:
                     if bound_skip:
                         q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
                         if q + SKIP_MARGIN < best:
                             # a feasible distribution shows it below the best: not sorted
-                            if has_base:
-                                qbase[r] = q + SKIP_MARGIN - c_now
+                            bounded[r] = True
+                            qbase[r] = q + SKIP_MARGIN - c_now
                             continue
                     q = sorted_value(
                         r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys

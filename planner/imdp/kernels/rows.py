@@ -68,7 +68,8 @@ def feasible_bound(r: int, row_ptr, remaining, succ, lower, gap, v, crit) -> flo
     ``t``. Where the successors below ``t`` can take more than the remaining mass
     ``rem = 1 - sum(l)``, it is spread over them in proportion to their gaps; else every
     successor up to ``t`` gets its upper bound and the rest is spread over those above
-    ``t`` in proportion to their gaps; ``inf`` where neither is feasible. The adversary's
+    ``t`` in proportion to their gaps; ``inf`` where neither is feasible, ``nan`` where
+    the critical successor stands after all (then :func:`threshold_value` is exact). The adversary's
     minimum is below every feasible distribution's expectation; the sums are rounded by a
     few units in ``1e-16``, which callers cover with a margin."""
     rem = remaining[r]
@@ -92,6 +93,8 @@ def feasible_bound(r: int, row_ptr, remaining, succ, lower, gap, v, crit) -> flo
         gk_all += g * k
     upto = t * g_less - short + t * g_eq  # sum of g k over the successors up to t
     g_more = g_all - g_less - g_eq
+    if rem > 0.0 and g_less <= rem and rem <= g_less + g_eq:
+        return np.nan  # the critical successor stands: threshold_value is exact
     if rem > 0.0 and rem <= g_less:
         return lv + rem * t - short * (rem / g_less)
     if rem > 0.0 and g_more > 0.0:

@@ -50,6 +50,7 @@ the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
 _NO_INDEX = np.empty(0, dtype=np.int64)
+_NO_FLAGS = np.empty(0, dtype=np.bool_)
 _NO_LIGHT = (
     np.zeros(1, dtype=np.int64),
     np.empty(0),
@@ -138,6 +139,7 @@ class ReachSweeper:
         # values after the last sweep, and the rise of the values since the first sweep
         self._qbase = np.full(rows.size, np.inf) if self.maximize and ELIMINATE else self._no_cache
         self._qmax = np.full(self.states.size if self._qbase.size else 0, np.inf)
+        self._bounded = np.zeros(self._qbase.size, dtype=np.bool_)
         self._last = self._no_cache
         self._rise = 0.0
         # the first state of the later half of a full sweep in halves (0: whole)
@@ -179,7 +181,7 @@ class ReachSweeper:
                     _NO_LIGHT,
                     _NO_INDEX,
                     0,
-                    False,
+                    _NO_FLAGS,
                 )
             )
         self._rise = rose(self._rise, residual)
@@ -219,7 +221,7 @@ class ReachSweeper:
                 light,
                 slots[first:last] if slots.size else slots,
                 first,
-                BOUND_SKIP,
+                self._bounded if BOUND_SKIP else _NO_FLAGS,
             )
 
         cut, n = self._cut, st.size

@@ -432,7 +432,7 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
             sweeps._NO_LIGHT,
             sweeps._NO_INDEX,
             0,
-            False,
+            sweeps._NO_FLAGS,
         )
         st, rows, best = ref.states, ref.state_rows, ref.best_row
         r0 = gauss_seidel_sweep(st[:cut], rows[: cut + 1], *layout, want, best[:cut], *sides)
@@ -629,7 +629,7 @@ def test_full_sweeps_read_the_best_rows_from_the_light_copy(seed):
         )
         none4 = (none, none, none, none, 0.0)
         r = gauss_seidel_sweep(
-            *args, *none4, light if use_light else sweeps._NO_LIGHT, slots, 0, False
+            *args, *none4, light if use_light else sweeps._NO_LIGHT, slots, 0, sweeps._NO_FLAGS
         )
         results.append((r, vv, best, crit, light))
     (r0, v0, b0, _, _), (r1, v1, b1, crit1, light1) = results
