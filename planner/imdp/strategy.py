@@ -11,6 +11,7 @@ from scipy.sparse.csgraph import connected_components
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.evaluate import strategy_reach_value
+from planner.imdp.kernels.rows import greedy_rows
 from planner.imdp.model import IMDP, first_of_runs, row_entries, run_ids
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.problem import DiscountedReward, ReachAvoid
@@ -236,15 +237,13 @@ def strategy_rows(
     choice = np.full(n, -1, dtype=np.int64)
     if free_rows.size == 0:
         return choice
-    rs = m.row_state[free_rows]
-    best = state_best(q_free, seg, rs, maximize)
-    opt_local = optimal_rows(q_free, seg, rs, maximize, tol, best)
     # the greedy rows: the first of each state's best (exactly; the others that count as
     # optimal may be short of it by up to the slack at every step)
-    top = np.flatnonzero(q_free == best)
-    greedy = top[first_of_runs(rs[top])]
-    choice[rs[greedy]] = free_rows[greedy]
-    if reach_max and greedy.size < opt_local.size:
+    greedy, tied = greedy_rows(q_free, seg, maximize, optimal_slack(tol))
+    choice[seg_states] = free_rows[greedy]
+    if reach_max and tied:
+        rs = m.row_state[free_rows]
+        opt_local = optimal_rows(q_free, seg, rs, maximize, tol)
         free = np.zeros(n, dtype=bool)
         free[seg_states] = True
         settled = ~free | (v <= 0)

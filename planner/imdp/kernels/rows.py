@@ -368,3 +368,27 @@ def unordered_rows(row_ptr, succ, keys, tol):
                 n += 1
                 break
     return out[:n]
+
+
+@numba.njit(cache=True, nogil=True)
+def greedy_rows(q, seg, maximize, slack):
+    """Per state (its rows ``seg[i]:seg[i + 1]`` of ``q``, the last run to the end) the
+    first row of its best value, exactly, and whether any state has another row within
+    ``slack`` of its best (``|q - best| <= slack``): one pass, for
+    :func:`planner.imdp.strategy.strategy_rows`."""
+    greedy = np.empty(seg.size, dtype=np.int64)
+    tied = False
+    for i in range(seg.size):
+        a = seg[i]
+        b = seg[i + 1] if i + 1 < seg.size else q.size
+        arg = a
+        for r in range(a + 1, b):
+            if (q[r] > q[arg]) if maximize else (q[r] < q[arg]):
+                arg = r
+        greedy[i] = arg
+        if not tied:
+            near = 0
+            for r in range(a, b):
+                near += abs(q[r] - q[arg]) <= slack
+            tied = near > 1
+    return greedy, tied
