@@ -669,3 +669,32 @@ def test_the_feasible_bound_of_a_moved_row_is_never_below_its_value(zero_lower):
             gaps.append(bound - exact)
     assert moved > 50
     assert np.median(gaps) < 0.05
+
+
+@pytest.mark.parametrize("maximize", [True, False])
+def test_greedy_rows_match_the_array_reference(maximize):
+    """The compiled greedy rows (first of each state's exact best) and the flag of a state
+    with another row within the slack equal the array computation they replace."""
+    from planner.imdp.kernels.rows import greedy_rows
+    from planner.imdp.model import first_of_runs
+    from planner.imdp.strategy import optimal_rows, state_best
+
+    rng = np.random.default_rng(5)
+    outcomes = set()
+    for trial in range(30):
+        rs = np.sort(rng.integers(0, 40, size=200))
+        q = np.round(rng.random(200), 2)  # exact ties
+        if trial % 3 == 0:
+            q = q + rng.random(200) * 1e-6  # rows near but not at the best
+        seg = first_of_runs(rs)
+        slack = 1e-7 if trial % 2 else 1e-5
+        best = state_best(q, seg, rs, maximize)
+        top = np.flatnonzero(q == best)
+        want = top[first_of_runs(rs[top])]
+        got, tied = greedy_rows(q, seg, maximize, slack)
+        np.testing.assert_array_equal(got, want)
+        near = np.abs(q - best) <= slack
+        assert tied == bool(np.bincount(rs[near]).max() > 1)
+        assert tied == (want.size < optimal_rows(q, seg, rs, maximize, slack / 10).size)
+        outcomes.add(tied)
+    assert outcomes == {False, True}
