@@ -31,9 +31,13 @@ from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
 
 ELIMINATE = True
-BOUND_SKIP = True
 """Full sweeps of a maximising strategy skip rows by their last values
 (:func:`gauss_seidel_sweep`'s ``qbase``)."""
+
+BOUND_SKIP = True
+"""With ``ELIMINATE``, against the minimising adversary: full sweeps do not sort a row
+whose critical successor moved where a feasible distribution shows it below the best
+(:func:`gauss_seidel_sweep`'s ``bounded``)."""
 
 HALVES_SWEEP_ENTRIES = 100_000
 """Entries of a full sweep from which :meth:`ReachSweeper.sweep` runs it in two halves at
