@@ -138,10 +138,7 @@ def _settled(
             (free, guessed), (pos, prob1, choice) = concurrently(
                 lambda: _guessed_layout(m, rows, target, avoid), searches, "layout"
             )
-            settles = pos & ~target & ~avoid
-            if np.any(prob1 & ~target) or not np.array_equal(
-                free, np.flatnonzero(rows & settles[m.row_state])
-            ):
+            if np.any(prob1 & ~target) or not np.array_equal(free, pos & ~target & ~avoid):
                 guessed = None
         choice = np.where(prob1, choice, -1)
         zero = ~pos
@@ -171,18 +168,19 @@ the layout is built anew after them."""
 def _guessed_layout(
     m: IMDP, rows: np.ndarray, target: np.ndarray, avoid: np.ndarray
 ) -> tuple[np.ndarray, ReachSweeper]:
-    """The sweeps' layout (:func:`planner.imdp.kernels.sweeps.sweep_layout`), with its free
-    rows, as if the free states were those that can reach the target at all (a path of
-    ``upper > 0`` entries avoiding ``avoid``) and no state outside the target had value 1.
-    The guess holds where every such state reaches the target with positive probability
-    against every adversary and none almost surely: on the benchmarks of
-    ``benchmarks/bench_vi.py`` (grid seeds 0-2 and the random model), where the layout
-    then overlaps both searches instead of following the first."""
+    """The sweeps' layout (:func:`planner.imdp.kernels.sweeps.sweep_layout`) and its free
+    states (a mask), as if those were the states that can reach the target at all (a path
+    of ``upper > 0`` entries avoiding ``avoid``) and no state outside the target had value
+    1. Each such state has an allowed row, so the mask compares as it is with the solve's
+    free states, ``pos & ~target & ~avoid``. The guess holds where every such state
+    reaches the target with positive probability against every adversary and none almost
+    surely: on the benchmarks of ``benchmarks/bench_vi.py`` (grid seeds 0-2 and the random
+    model), where the layout then overlaps both searches instead of following the first."""
     candidates = np.flatnonzero(rows & ~(target | avoid)[m.row_state])
     dist = layers(m, candidates, target)
     reach = np.isfinite(dist) & ~target
     free = candidates[reach[m.row_state[candidates]]]
-    return free, ReachSweeper(m, free, dist, True, True)
+    return reach, ReachSweeper(m, free, dist, True, True)
 
 
 def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np.ndarray):

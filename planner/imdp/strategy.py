@@ -176,17 +176,11 @@ def state_best(q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool) -
 
 
 def optimal_rows(
-    q: np.ndarray,
-    seg: np.ndarray,
-    rs: np.ndarray,
-    maximize: bool,
-    tol: float,
-    best: np.ndarray | None = None,
+    q: np.ndarray, seg: np.ndarray, rs: np.ndarray, maximize: bool, tol: float
 ) -> np.ndarray:
     """Indices of the rows (values ``q``, states ``rs`` in runs starting at ``seg``)
-    within :func:`optimal_slack` of their state's best (``best``, per row, if known): the
-    rows that count as optimal."""
-    best = state_best(q, seg, rs, maximize) if best is None else best
+    within :func:`optimal_slack` of their state's best: the rows that count as optimal."""
+    best = state_best(q, seg, rs, maximize)
     return np.flatnonzero(np.abs(q - best) <= optimal_slack(tol))
 
 

@@ -86,13 +86,12 @@ def bounded_row_values(
                 out[r] = q
                 continue
             q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-            if q != q and adversary_minimizes:
-                q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit) + SKIP_MARGIN
-                if q < best - slack:
-                    out[r] = q
-                    continue
-                q = np.nan
             if q != q:
+                if adversary_minimizes:
+                    b = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
+                    if b + SKIP_MARGIN < best - slack:
+                        out[r] = b + SKIP_MARGIN
+                        continue
                 q = sorted_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
             out[r] = q
 

@@ -165,15 +165,12 @@ def gauss_seidel_sweep(
                     continue
                 if has_base and qbase[r] + rise < best:
                     continue
+                # a row skipped by its bound before keeps a stale critical successor:
+                # its threshold is not tried, its bound comes first
                 if bound_skip and bounded[r]:
-                    # skipped by its bound before, its critical successor left stale: the
-                    # bound again in one pass, exact values only where it fails
-                    q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
-                    if q + SKIP_MARGIN < best:
-                        qbase[r] = q + SKIP_MARGIN - c_now
-                        continue
-                    bounded[r] = False
-                q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                    q = np.nan
+                else:
+                    q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                 if q != q:
                     if bound_skip:
                         q = feasible_bound(r, row_ptr, remaining, succ, lower, gap, v, crit)
@@ -182,6 +179,7 @@ def gauss_seidel_sweep(
                             bounded[r] = True
                             qbase[r] = q + SKIP_MARGIN - c_now
                             continue
+                        bounded[r] = False
                     q = sorted_value(
                         r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
                     )

@@ -69,9 +69,9 @@ def feasible_bound(r: int, row_ptr, remaining, succ, lower, gap, v, crit) -> flo
     ``rem = 1 - sum(l)``, it is spread over them in proportion to their gaps; else every
     successor up to ``t`` gets its upper bound and the rest is spread over those above
     ``t`` in proportion to their gaps; ``inf`` where neither is feasible, ``nan`` where
-    the critical successor stands after all (then :func:`threshold_value` is exact). The adversary's
-    minimum is below every feasible distribution's expectation; the sums are rounded by a
-    few units in ``1e-16``, which callers cover with a margin."""
+    the critical successor stands after all (then :func:`threshold_value` is exact). The
+    adversary's minimum is below every feasible distribution's expectation; the sums are
+    rounded by a few units in ``1e-16``, which callers cover with a margin."""
     rem = remaining[r]
     t = v[succ[crit[r]]]
     lv = 0.0
