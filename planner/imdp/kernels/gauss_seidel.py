@@ -224,3 +224,32 @@ def gauss_seidel_sweep(
             if best - old > residual:
                 residual = best - old
     return residual
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
+def light_sweep(states, row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes, last):
+    """A light sweep: :func:`gauss_seidel_sweep` with ``full`` false on the contiguous copy
+    of one row per state (row ``k`` of the copy belongs to ``states[k]``), in place;
+    returns the largest change. The same updates without that kernel's tests for the
+    strategy's rows and the bounds of a full sweep: the light sweeps of the random
+    100k-state benchmark model are most of its sweeps."""
+    sign = 1.0 if adversary_minimizes else -1.0
+    idx, keys = scratch(row_ptr)
+    residual = 0.0
+    track = last.size > 0
+    for k in range(states.size):
+        s = states[k]
+        q = threshold_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+        if q != q:
+            q = sorted_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+            again = threshold_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            q = again if again == again else q
+        q = below(q, k, row_ptr)
+        old = v[s]
+        if q > old:
+            v[s] = q
+            if track:
+                last[s] = q
+            if q - old > residual:
+                residual = q - old
+    return residual

@@ -127,17 +127,24 @@ def below(q: float, r: int, row_ptr) -> float:
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def sort_entries(a: int, n: int, succ, v, sign: float, idx, keys) -> None:
-    """Insertion sort of the entries ``a:a + n`` by the key ``sign * v[succ]`` into the
-    scratch arrays: ``idx[:n]`` the entries, ``keys[:n]`` their keys, ascending (stable)."""
+    """Stable sort of the entries ``a:a + n`` by the key ``sign * v[succ]`` into the
+    scratch arrays: ``idx[:n]`` the entries, ``keys[:n]`` their keys, ascending
+    (``keys[n:2n]`` holds the keys in entry order). Each entry goes to its rank, the
+    number of entries with a smaller key or an equal one before it: ``n^2`` compares and
+    adds without a branch on the keys, where an insertion sort mispredicts its branches
+    (on the random 100k-state benchmark model's rows of 9 entries a row sorted and
+    evaluated took 145 ns instead of 205 ns)."""
     for i in range(n):
-        k = sign * v[succ[a + i]]
-        j = i - 1
-        while j >= 0 and keys[j] > k:
-            keys[j + 1] = keys[j]
-            idx[j + 1] = idx[j]
-            j -= 1
-        keys[j + 1] = k
-        idx[j + 1] = a + i
+        keys[n + i] = sign * v[succ[a + i]]
+    for i in range(n):
+        k = keys[n + i]
+        rank = 0
+        for j in range(i):
+            rank += keys[n + j] <= k
+        for j in range(i + 1, n):
+            rank += keys[n + j] < k
+        idx[rank] = a + i
+        keys[rank] = k
 
 
 @numba.njit(cache=True, nogil=True)
@@ -175,9 +182,10 @@ def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, c
 
 @numba.njit(cache=True, nogil=True)
 def scratch(row_ptr):
-    """Scratch arrays for :func:`sorted_value`, as long as the longest row."""
+    """Scratch arrays for :func:`sorted_value`: entries as many as the longest row has,
+    keys twice as many (:func:`sort_entries`)."""
     width = longest_row(row_ptr)
-    return np.empty(width, dtype=np.int64), np.empty(width)
+    return np.empty(width, dtype=np.int64), np.empty(2 * width)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from planner._util.threads import concurrently, in_halves
 from planner.imdp.kernels.elimination import bounded_row_values, rise_since, rose
-from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep
+from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep, light_sweep
 from planner.imdp.kernels.rows import (
     all_row_values,
     fill_layout,
@@ -134,7 +134,6 @@ class ReachSweeper:
         self._tracked = False
         self.maximize = bool(maximize)
         self.adversary_minimizes = bool(adversary_minimizes)
-        self._one_row = np.arange(self.states.size + 1, dtype=np.int64)
         self._light: tuple[np.ndarray, ...] | None = None
         self._light_rows = self.best_row
         self._no_cache = np.empty(0)
@@ -155,7 +154,8 @@ class ReachSweeper:
         rows (``full``; those whose ``bound``, a per-row upper bound such as the row cache
         of the passes from above, is below the best found are skipped; from
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
-        the best rows of the last full sweep."""
+        the best rows of the last full sweep, from their contiguous copy
+        (:func:`light_sweep`)."""
         self._track(v)
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
@@ -168,25 +168,7 @@ class ReachSweeper:
                 self._light = gather_rows(self.best_row, *layout)
         else:
             residual = float(
-                gauss_seidel_sweep(
-                    self.states,
-                    self._one_row,
-                    *self._light,
-                    v,
-                    self._one_row,
-                    False,
-                    self.maximize,
-                    self.adversary_minimizes,
-                    self._no_cache,
-                    self._no_cache,
-                    self._no_cache,
-                    self._last,
-                    self._rise,
-                    _NO_LIGHT,
-                    _NO_INDEX,
-                    0,
-                    _NO_FLAGS,
-                )
+                light_sweep(self.states, *self._light, v, self.adversary_minimizes, self._last)
             )
         self._rise = rose(self._rise, residual)
         return residual

@@ -42,8 +42,8 @@ def row_excess(a, b, succ, lower, upper, u, us, minimizes, idx, keys, work, belo
     ``below``: a *lower* bound of the exact excess instead, from the adversary's greedy
     vertex shown feasible (the minimum of a minimising adversary, a value a maximising one
     can reach; ``-inf`` where no vertex is shown feasible).
-    ``idx``/``keys``: scratch as long as the row; ``work``: scratch of twice that length
-    plus 8."""
+    ``idx``: scratch as long as the row, ``keys`` twice that (:func:`sort_entries`);
+    ``work``: scratch of twice the row length plus 8."""
     n = b - a
     sort_entries(a, n, succ, u, 1.0 if minimizes else -1.0, idx, keys)
     # the critical position: the adversary's remaining mass runs out there

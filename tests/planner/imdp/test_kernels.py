@@ -698,3 +698,62 @@ def test_greedy_rows_match_the_array_reference(maximize):
         assert tied == (want.size < optimal_rows(q, seg, rs, maximize, slack / 10).size)
         outcomes.add(tied)
     assert outcomes == {False, True}
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_sorting_a_row_by_rank_is_a_stable_sort(sign):
+    """The branch-free sort of a row's entries (each to its rank) puts them in the order of
+    a stable sort by key, ties (exact, and -0.0 against 0.0) in entry order."""
+    from planner.imdp.kernels.rows import sort_entries
+
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        n = int(rng.integers(1, 26))
+        v = np.round(rng.random(30), 1)  # many exact ties
+        v[rng.random(30) < 0.1] = -0.0
+        succ = rng.integers(0, 30, size=n + 5)
+        a = int(rng.integers(0, 6))
+        idx, keys = np.full(n, -1, dtype=np.int64), np.full(2 * n, np.nan)
+        sort_entries(a, n, succ, v, sign, idx, keys)
+        k = sign * v[succ[a : a + n]]
+        order = np.argsort(k, kind="stable")
+        np.testing.assert_array_equal(idx, a + order)
+        np.testing.assert_array_equal(keys[:n], k[order])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_light_kernel_is_the_generic_sweep_of_the_best_rows(seed):
+    """A light sweep (:func:`light_sweep`, the contiguous copy of the best rows) updates the
+    values, critical successors and the record of written values as the generic kernel's
+    sweep of only the best rows does (``full`` false), up to the rounding of its sums."""
+    from planner.imdp.kernels import gauss_seidel_sweep
+    from planner.imdp.kernels.gauss_seidel import light_sweep
+
+    rng = np.random.default_rng(700 + seed)
+    m = random_imdp(rng, n_states=120, n_actions=3, max_succ=7, zero_lower=bool(seed % 2))
+    sw = _sweeper(m, seed < 2)
+    v = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    sw.sweep(v, True)
+    sw.sweep(v, True)
+    v = v * (1.0 + 0.5 * rng.random(v.size))  # values moved: some rows need sorting
+    one = np.arange(sw.states.size + 1, dtype=np.int64)
+    none = np.empty(0)
+    out = []
+    for generic in (False, True):
+        vv, light, last = v.copy(), tuple(a.copy() for a in sw._light), np.zeros(v.size)
+        if generic:
+            r = gauss_seidel_sweep(
+                sw.states, one, *light, vv, one, False, True, sw.adversary_minimizes,
+                none, none, none, last, 0.0, sweeps._NO_LIGHT, sweeps._NO_INDEX, 0,
+                sweeps._NO_FLAGS,
+            )  # fmt: skip
+        else:
+            r = light_sweep(sw.states, *light, vv, sw.adversary_minimizes, last)
+        out.append((r, vv, light[5], last))
+    (r0, v0, c0, l0), (r1, v1, c1, l1) = out
+    assert r0 > 0.0 and abs(r0 - r1) <= 1e-15
+    np.testing.assert_allclose(v0, v1, rtol=0.0, atol=1e-15)
+    np.testing.assert_allclose(l0, l1, rtol=0.0, atol=1e-15)
+    assert np.any(c1 != sw._light[5])  # rows were sorted anew
+    keys = [v1[light[2][c]] for c in (c0, c1)]
+    np.testing.assert_array_equal(keys[0], keys[1])

@@ -44,7 +44,7 @@ def test_row_excess_bounds_the_exact_excess_from_both_sides(seed):
     # with ``below`` the same from underneath
     rng = np.random.default_rng(seed)
     n = 12
-    idx, keys, work = np.empty(n, dtype=np.int64), np.empty(n), np.empty(2 * n + 8)
+    idx, keys, work = np.empty(n, dtype=np.int64), np.empty(2 * n), np.empty(2 * n + 8)
     checked = 0
     for trial in range(300):
         kind = trial % 3
@@ -79,7 +79,7 @@ def test_a_self_loop_adds_no_rounding_to_the_excess():
     succ = np.array([0, 1, 2])
     lo = np.array([1 - 2.0**-40, 2.0**-44, 15 * 2.0**-44])
     u = np.array([1 / 16, 1.0, 0.0])
-    idx, keys, work = np.empty(3, dtype=np.int64), np.empty(3), np.empty(14)
+    idx, keys, work = np.empty(3, dtype=np.int64), np.empty(6), np.empty(14)
     for minimizes in (True, False):
         hi = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, idx, keys, work)
         low = row_excess(0, 3, succ, lo, lo, u, u[0], minimizes, idx, keys, work, True)
@@ -93,7 +93,7 @@ def test_row_excess_refuses_a_vertex_it_cannot_show_feasible():
     lo = np.array([0.5, 0.5 - 1e-12])
     up = lo.copy()
     u = np.array([0.25, 0.75])
-    idx, keys, work = np.empty(2, dtype=np.int64), np.empty(2), np.empty(12)
+    idx, keys, work = np.empty(2, dtype=np.int64), np.empty(4), np.empty(12)
     assert row_excess(0, 2, succ, lo, up, u, 0.6, True, idx, keys, work) == np.inf
     # the maximising adversary's bound needs no vertex (weak duality)
     assert row_excess(0, 2, succ, lo, up, u, 0.6, False, idx, keys, work) < np.inf
@@ -302,7 +302,7 @@ def test_the_filtered_check_flags_the_same_states_by_the_same_excess(sides):
         seg = first_of_runs(rs)
         state_rows = np.append(seg, rows.size).astype(np.int64)
         n_long = int(np.max(np.diff(m.row_ptr)))
-        idx, keys, work = np.empty(n_long, np.int64), np.empty(n_long), np.empty(2 * n_long + 8)
+        idx, keys, work = np.empty(n_long, np.int64), np.empty(2 * n_long), np.empty(2 * n_long + 8)
         for u in (sol.upper, np.where(free, sol.upper - 1e-13, sol.upper), rng.random(m.n_states)):
             u = np.where(free, np.minimum(u, 1.0), sol.upper)
             got = np.empty(seg.size)
