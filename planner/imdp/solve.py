@@ -56,11 +56,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner._util.threads import concurrently
 from planner.errors import SpecificationError
 from planner.imdp import graph
 from planner.imdp.discounted import discounted_values
-from planner.imdp.kernels import ReachSweeper, layers
+from planner.imdp.guess import GUESS_ENTRIES, Guess, GuessFailed, Searched
 from planner.imdp.minimal import dual_reach, unavoidable_reach
 from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.ordering import OrderingAdversary
@@ -100,17 +99,20 @@ def _settled(
     pessimistic: bool,
     precompute: bool,
     target_closed: bool = False,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, ReachSweeper | None]:
+    searched: Searched | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, Guess | None]:
     """The states of a reach-avoid problem settled before iterating: ``(settled, value,
-    choice, guessed)``: targets, avoided states and (with ``precompute``) the states of
+    choice, guess)``: targets, avoided states and (with ``precompute``) the states of
     value 0 and, worst case maximising or minimising, of value 1 by graph analysis;
     ``choice`` the row by which a settled state attains its value where the action matters
     (-1 elsewhere): a maximising strategy's way to the target from its value-1 states, a
     minimising one's way to stay clear of it at its value-0 states. ``target_closed``:
     the target holds every state that reaches it almost surely, so the probability-1
     search is skipped. Worst case maximising, on large models, the sweeps' layout is
-    built on a second thread while the searches run (:func:`_guessed_layout`); ``guessed``
-    is that layout where the guess came true, else ``None``."""
+    built on a guess of the free states while the searches run (:mod:`planner.imdp.guess`):
+    ``guess`` is that guess while the searches still run (the settled states and values
+    are then the guess's, ``choice`` is the guess's to confirm), else ``None``;
+    ``searched``: the searches' outcome where a failed guess gave it."""
     n = m.n_states
     target = resolve_states(m, prop.target, "target")
     avoid = (
@@ -120,7 +122,7 @@ def _settled(
     )
     choice = np.full(n, -1, dtype=np.int64)
     prob1 = np.zeros(n, dtype=bool)
-    guessed = None
+    guess = None
     if not precompute:
         zero = np.zeros(n, dtype=bool)
     elif maximize and pessimistic:
@@ -131,15 +133,16 @@ def _settled(
                 return pos, prob1, choice
             return pos, *graph.robust_almost_sure_reach(m, target, avoid, rows, region=pos)
 
-        if m.n_entries < GUESS_ENTRIES:
+        if searched is not None:
+            pos, prob1, choice = searched
+        elif m.n_entries < GUESS_ENTRIES:
             pos, prob1, choice = searches()
         else:
-            m.reverse_index()  # built once, before both threads read it
-            (free, guessed), (pos, prob1, choice) = concurrently(
-                lambda: _guessed_layout(m, rows, target, avoid), searches, "layout"
-            )
-            if np.any(prob1 & ~target) or not np.array_equal(free, pos & ~target & ~avoid):
-                guessed = None
+            guess = Guess.start(m, rows, target, avoid, searches)
+            if guess.done():
+                guess.confirm()  # raises where it failed
+            settled, value = guess.settled
+            return settled, value, choice, guess
         choice = np.where(prob1, choice, -1)
         zero = ~pos
     elif maximize:
@@ -156,31 +159,7 @@ def _settled(
             escape = graph.possible_reach(m, zero, target, rows)
         prob1 = ~escape & ~target & ~zero
     settled = target | avoid | zero | prob1
-    return settled, np.where(target | prob1, 1.0, 0.0), choice, guessed
-
-
-GUESS_ENTRIES = 100_000
-"""Entries of a model from which the sweeps' layout is built on a second thread while the
-graph searches of the settled states run (:func:`_guessed_layout`); where the guess fails,
-the layout is built anew after them."""
-
-
-def _guessed_layout(
-    m: IMDP, rows: np.ndarray, target: np.ndarray, avoid: np.ndarray
-) -> tuple[np.ndarray, ReachSweeper]:
-    """The sweeps' layout (:func:`planner.imdp.kernels.sweeps.sweep_layout`) and its free
-    states (a mask), as if those were the states that can reach the target at all (a path
-    of ``upper > 0`` entries avoiding ``avoid``) and no state outside the target had value
-    1. Each such state has an allowed row, so the mask compares as it is with the solve's
-    free states, ``pos & ~target & ~avoid``. The guess holds where every such state
-    reaches the target with positive probability against every adversary and none almost
-    surely: on the benchmarks of ``benchmarks/bench_vi.py`` (grid seeds 0-2 and the random
-    model), where the layout then overlaps both searches instead of following the first."""
-    candidates = np.flatnonzero(rows & ~(target | avoid)[m.row_state])
-    dist = layers(m, candidates, target)
-    reach = np.isfinite(dist) & ~target
-    free = candidates[reach[m.row_state[candidates]]]
-    return reach, ReachSweeper(m, free, dist, True, True)
+    return settled, np.where(target | prob1, 1.0, 0.0), choice, guess
 
 
 def _row_values(m: IMDP, rows: np.ndarray, adversary_minimizes: bool, values: np.ndarray):
@@ -213,6 +192,17 @@ def solve_with(
     package's own callers, which know it; a target that is not closed gets correct
     values but, at the states of value 1 outside it, a strategy from the values alone."""
     alg = ValueIteration() if algorithm is None else algorithm
+    try:
+        return _solve(problem, alg, target_closed)
+    except GuessFailed as failed:
+        # the free states guessed for the sweeps' layout were wrong: from the searches'
+        return _solve(problem, alg, target_closed, failed.searched)
+
+
+def _solve(
+    problem: Problem, alg: ValueIteration, target_closed: bool, searched: Searched | None = None
+) -> Solution:
+    """:func:`solve_with`; ``searched``: the graph searches' outcome where known."""
     m = problem.model
     spec = problem.specification
     prop = spec.property
@@ -225,10 +215,10 @@ def solve_with(
     reach = isinstance(prop, ReachAvoid)
     if reach and alg.initial is not None:
         raise SpecificationError("initial values are for discounted reward (reachability from 0)")
-    layout = None  # the sweeps' layout, built beside the probability-1 search
+    guess = None  # the sweeps' layout, built while the graph searches run
     if reach:
-        settled, fixed_val, settled_choice, layout = _settled(
-            m, prop, rows, maximize, pessimistic, alg.precompute, target_closed
+        settled, fixed_val, settled_choice, guess = _settled(
+            m, prop, rows, maximize, pessimistic, alg.precompute, target_closed, searched
         )
         fixed = fixed | settled
     fixed_val = np.where(fixed, fixed_val, 0.0)
@@ -242,8 +232,11 @@ def solve_with(
         if dual:
             lower, upper, r = dual_reach(m, free_rows, fixed, fixed_val, adversary_minimizes, alg)
         else:
+            layout = None if guess is None else guess.layout
             r = reach_values(m, free_rows, fixed_val, adversary_minimizes, maximize, alg, layout)
             lower, upper = r.lower, r.upper
+            if guess is not None:
+                settled_choice = guess.confirm()
         v, residual, it, sigma = lower.copy(), r.residual, r.iterations, r.sigma
         evaluations, q_free, upper_sweeps = r.evaluations, r.q, r.upper_sweeps
         converged = (

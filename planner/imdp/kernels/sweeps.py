@@ -12,6 +12,7 @@ Gauss-Seidel sweep of two halves on two threads (:meth:`ReachSweeper.sweep`).
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -136,6 +137,8 @@ class ReachSweeper:
         self.adversary_minimizes = bool(adversary_minimizes)
         self._light: tuple[np.ndarray, ...] | None = None
         self._light_rows = self.best_row
+        self.before_sweep: Callable[[], None] | None = None
+        """Called before each sweep from below (to abandon the sweeps, it raises)."""
         self._no_cache = np.empty(0)
         # action elimination from the rows' last values (a maximising strategy; see
         # gauss_seidel_sweep): per layout row its last value less the rise then, the
@@ -156,6 +159,8 @@ class ReachSweeper:
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
         the best rows of the last full sweep, from their contiguous copy
         (:func:`light_sweep`)."""
+        if self.before_sweep is not None:
+            self.before_sweep()
         self._track(v)
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
@@ -292,6 +297,7 @@ class ReachSweeper:
         only: its own copy of the critical successors, which sweeps here may move."""
         view = copy.copy(self)
         view.crit = self.crit.copy()
+        view.before_sweep = None
         return view
 
     def adversary_matrix(self, u: np.ndarray, rows: np.ndarray | None = None) -> sp.csr_matrix:

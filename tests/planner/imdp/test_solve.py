@@ -1,5 +1,6 @@
 import importlib
 import threading
+from concurrent.futures import Future
 from fractions import Fraction
 
 import numpy as np
@@ -671,6 +672,92 @@ def test_sweeps_in_halves_reach_the_reference_values_and_repeat_exactly(zero_low
                 np.testing.assert_array_equal(got.lower, again.lower)
                 np.testing.assert_array_equal(got.upper, again.upper)
                 np.testing.assert_array_equal(got.strategy, again.strategy)
+
+
+class _HeldFuture(Future):
+    """A future whose work runs only when :meth:`run` is called, or when its result is
+    asked for (the searches of a guessed layout ending whenever a test decides)."""
+
+    def __init__(self, fn, at_once: bool) -> None:
+        super().__init__()
+        self._fn = fn
+        if at_once:
+            self.run()
+
+    def run(self) -> None:
+        if not self.done():
+            self.set_result(self._fn())
+
+    def result(self, timeout=None):
+        self.run()
+        return super().result(timeout)
+
+
+@pytest.mark.parametrize("ends", ["at once", "after 1 sweep", "after 3 sweeps", "at the end"])
+def test_the_searches_may_end_at_any_sweep_of_a_guessed_layout(ends, monkeypatch):
+    """Whenever the graph searches beside a guessed layout end (before the first sweep,
+    between sweeps, or only when the solve asks for them), the solve equals the one that
+    searched first: the sweeps are abandoned and started again where the guess was wrong,
+    and kept where it was right."""
+    solve_mod = importlib.import_module("planner.imdp.solve")
+    guess_mod = importlib.import_module("planner.imdp.guess")
+    sweeper_cls = importlib.import_module("planner.imdp.kernels.sweeps").ReachSweeper
+    sweep = sweeper_cls.sweep
+    held: list[_HeldFuture] = []
+
+    class Held:
+        def submit(self, fn):
+            held.append(_HeldFuture(fn, ends == "at once"))
+            return held[-1]
+
+    after = {"after 1 sweep": 1, "after 3 sweeps": 3}.get(ends)
+    count = [0]
+
+    def counted_sweep(self, *args, **kwargs):
+        count[0] += 1
+        if after is not None and count[0] > after and held:
+            held[-1].run()
+        return sweep(self, *args, **kwargs)
+
+    rng = np.random.default_rng(12)
+    outcomes, abandoned = set(), set()
+    for trial in range(10):
+        m = random_imdp(rng, n_states=40, n_actions=3, max_succ=4, zero_lower=True)
+        target, avoid = m.states_labelled("goal"), m.states_labelled("bad")
+        problem = Problem(m, Specification(ReachAvoid(target, avoid)))
+        alg = ValueIteration(certified=trial % 2 == 0)
+        monkeypatch.setattr(solve_mod, "GUESS_ENTRIES", 10**12)
+        want = solve(problem, alg)
+        monkeypatch.setattr(solve_mod, "GUESS_ENTRIES", 0)
+        monkeypatch.setattr(guess_mod, "worker", lambda purpose: Held())
+        monkeypatch.setattr(sweeper_cls, "sweep", counted_sweep)
+        restarts = []
+        run = solve_mod._solve
+
+        def recorded(*a, restarts=restarts, run=run):
+            restarts.append((len(a) > 3, count[0]))
+            return run(*a)
+
+        monkeypatch.setattr(solve_mod, "_solve", recorded)
+        count[0] = 0
+        held.clear()
+        got = solve(problem, alg)
+        monkeypatch.undo()
+        for field in ("values", "strategy", "lower", "upper", "fixed"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+        assert got.iterations == want.iterations
+        assert len(held) == 1 and held[0].done()
+        assert [again for again, _ in restarts] in ([False], [False, True])
+        failed = len(restarts) == 2
+        outcomes.add(failed)
+        if failed and ends == "at once":
+            assert restarts[1][1] == 0  # abandoned before the first sweep
+        elif failed and after is not None:
+            # at the first sweep after the searches ended (or at the end, if sooner)
+            assert restarts[1][1] <= after + 1
+            abandoned.add(restarts[1][1] == after + 1)
+    assert outcomes == {False, True}
+    assert after is None or True in abandoned
 
 
 @pytest.mark.parametrize("certified", [False, True])
