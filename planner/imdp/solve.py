@@ -222,7 +222,10 @@ def _solve(
         )
         fixed = fixed | settled
     fixed_val = np.where(fixed, fixed_val, 0.0)
-    free_rows = np.flatnonzero(rows & ~fixed[m.row_state])
+    if guess is None:
+        free_rows = np.flatnonzero(rows & ~fixed[m.row_state])
+    else:
+        free_rows = guess.layout.free_rows  # the same rows, formed once
     rs = m.row_state[free_rows]
     seg = first_of_runs(rs)
     sigma, evaluations, upper_sweeps = None, 0, 0

@@ -98,6 +98,8 @@ class ReachSweeper:
         adversary_minimizes: bool,
     ) -> None:
         m = model
+        self.free_rows = free_rows
+        """The free rows as given (sorted)."""
         # the states in increasing key (a stable sort of the states, then each state's run
         # of rows: the order of (key, row), without sorting the rows)
         rs = m.row_state[free_rows]
