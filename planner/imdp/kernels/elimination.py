@@ -60,6 +60,7 @@ def bounded_row_values(
     crit,
     v,
     adversary_minimizes,
+    light,
 ) -> None:
     """:func:`planner.imdp.kernels.rows.all_row_values` for the rows of the layout states
     ``first:last``, except that a row whose bound from its last value (``qbase + c_now``,
@@ -68,15 +69,29 @@ def bounded_row_values(
     best by more than ``slack``; so does, against the minimising adversary, a row whose
     critical successor moved and whose feasible distribution
     (:func:`planner.imdp.kernels.rows.feasible_bound`, plus ``SKIP_MARGIN``) shows it so,
-    without sorting it."""
+    without sorting it. ``light`` (its rows empty: none): the light sweeps' contiguous copy
+    of the best rows, row ``k`` of it a copy of ``best_row[k]``, from which the best rows
+    are read (their critical successors copied back), as the full sweeps read them."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     rise = rise_bound(c_now)
+    l_ptr, l_rem, l_succ, l_lower, l_gap, l_crit = light
+    from_light = l_rem.size > 0
     for k in range(first, last):
         arg = best_row[k]
-        best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-        if best != best:
-            best = sorted_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
+        if from_light:
+            best = threshold_value(k, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
+            if best != best:
+                best = sorted_value(
+                    k, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit, idx, keys
+                )
+            crit[arg] = row_ptr[arg] + l_crit[k] - l_ptr[k]
+        else:
+            best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if best != best:
+                best = sorted_value(
+                    arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                )
         out[arg] = best
         for r in range(state_rows[k], state_rows[k + 1]):
             if r == arg:

@@ -340,9 +340,13 @@ class ReachSweeper:
             self._track(v)
             work = self.row_ptr[self.state_rows]
             args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
+            # the best rows from the light sweeps' copy, as the full sweeps read them
+            light = _NO_LIGHT if self._light is None else self._light
 
             def fill(first: int, last: int) -> None:
-                bounded_row_values(first, last, q, *args, *layout, v, self.adversary_minimizes)
+                bounded_row_values(
+                    first, last, q, *args, *layout, v, self.adversary_minimizes, light
+                )
 
         else:
             work = self.row_ptr
