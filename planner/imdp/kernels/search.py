@@ -11,7 +11,7 @@ import numpy as np
 from planner._util.threads import in_halves
 from planner.imdp.kernels.exact import near_one, sum_sign
 from planner.imdp.kernels.rows import longest_row
-from planner.imdp.model import IMDP, entries_of_rows
+from planner.imdp.model import entries_of_rows
 
 
 @numba.njit(cache=True, nogil=True)
@@ -256,10 +256,9 @@ def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper,
     entries of the rows in ``row_mask`` (``inf`` where no path). ``inc_state``: the state
     of each incoming entry's row (:meth:`planner.imdp.model.IMDP.reverse_index`), read
     in order, so that an entry from a state already reached costs no lookup of its row.
-    ``limit``: how many states can be reached at most (the sources and the states with a
-    row in ``row_mask``, :func:`reach_limit`); the search ends once that many are (on the
-    random 100k-state benchmark model after a fraction of the 7.2M entries it would scan
-    to empty its queue)."""
+    ``limit``: how many states can be reached at most; the search ends once that many
+    are. (The sweeps' layers search level by level in either direction,
+    :func:`planner.imdp.kernels.layers.layers`.)"""
     dist = np.full(sources.size, np.inf)
     queue = np.empty(sources.size, dtype=np.int64)
     tail = 0
@@ -281,28 +280,6 @@ def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper,
             queue[tail] = s
             tail += 1
     return dist
-
-
-def reach_limit(sources: np.ndarray, row_state: np.ndarray, rows: np.ndarray) -> int:
-    """How many states a backward search from ``sources`` over ``rows`` (indices or a
-    mask) can reach at most: the sources and the states with one of the rows."""
-    can = np.array(sources, dtype=bool, copy=True)
-    can[row_state[rows]] = True
-    return int(np.count_nonzero(can))
-
-
-def layers(m: IMDP, free_rows: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """Breadth-first distance (in hops over ``upper > 0`` edges of ``free_rows``, indices
-    or a row mask) from each state to ``sources``; ``inf`` where there is no path."""
-    if free_rows.dtype == np.bool_:
-        row_mask = free_rows
-    else:
-        row_mask = np.zeros(m.n_rows, dtype=bool)
-        row_mask[free_rows] = True
-    ptr, inc_row, inc_state, _, inc_upper = m.reverse_index()
-    src = np.asarray(sources, dtype=bool)
-    limit = reach_limit(src, m.row_state, free_rows)
-    return backward_distance(src, row_mask, ptr, inc_row, inc_state, inc_upper, limit)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from planner._util.threads import concurrently, in_halves
 from planner.imdp.kernels.elimination import bounded_row_values, rise_since, rose
 from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep, light_sweep
+from planner.imdp.kernels.layers import layers
 from planner.imdp.kernels.rows import (
     all_row_values,
     fill_layout,
@@ -27,7 +28,6 @@ from planner.imdp.kernels.rows import (
     patch_rows,
     row_distributions,
 )
-from planner.imdp.kernels.search import layers
 from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
 from planner.imdp.model import IMDP, first_of_runs
 
@@ -367,6 +367,6 @@ def sweep_layout(
     m: IMDP, free_rows: np.ndarray, fixed_val: np.ndarray, maximize: bool, adversary_minimizes: bool
 ) -> ReachSweeper:
     """The sweeps' layout of the free rows, the states in order of graph distance to the
-    value-1 states of ``fixed_val`` (:func:`planner.imdp.kernels.search.layers`)."""
+    value-1 states of ``fixed_val`` (:func:`planner.imdp.kernels.layers.layers`)."""
     dist = layers(m, free_rows, fixed_val == 1.0)
     return ReachSweeper(m, free_rows, dist, maximize, adversary_minimizes)

@@ -757,3 +757,29 @@ def test_the_light_kernel_is_the_generic_sweep_of_the_best_rows(seed):
     assert np.any(c1 != sw._light[5])  # rows were sorted anew
     keys = [v1[light[2][c]] for c in (c0, c1)]
     np.testing.assert_array_equal(keys[0], keys[1])
+
+
+@pytest.mark.parametrize("dense", [False, True])
+def test_layers_in_either_direction_equal_a_top_down_search(dense):
+    """The sweeps' layers, searched level by level top-down or bottom-up (dense models
+    reach most states in the first level, so the next goes bottom-up), are the hop counts
+    of a plain top-down breadth-first search, also where some states are unreachable."""
+    from planner.imdp.kernels import backward_distance, layers
+
+    rng = np.random.default_rng(31 + dense)
+    for _ in range(10):
+        if dense:
+            m = random_imdp(rng, n_states=300, n_actions=3, max_succ=9, zero_lower=True)
+        else:
+            m = random_imdp(rng, n_states=120, n_actions=2, max_succ=2, zero_lower=True)
+        free = np.flatnonzero(rng.random(m.n_rows) < 0.8)
+        sources = rng.random(m.n_states) < 0.05
+        sources[0] = True
+        row_mask = np.zeros(m.n_rows, dtype=bool)
+        row_mask[free] = True
+        ptr, inc_row, inc_state, _, inc_upper = m.reverse_index()
+        want = backward_distance(sources, row_mask, ptr, inc_row, inc_state, inc_upper, m.n_states)
+        np.testing.assert_array_equal(layers(m, free, sources), want)
+        np.testing.assert_array_equal(layers(m, row_mask, sources), want)
+        if dense:
+            assert np.mean(want == 1.0) > 0.5
