@@ -122,3 +122,53 @@ def layer_distance(
         frontier, reached = reached, frontier
         n_front = n_next
     return dist
+
+
+@numba.njit(cache=True, nogil=True)
+def sweep_order(free_rows, row_state, key, model_row_ptr, row_lower_sum):
+    """The index of the sweeps' layout (:class:`planner.imdp.kernels.sweeps.ReachSweeper`)
+    in one pass after a stable sort of the states: the states of ``free_rows`` (sorted) in
+    increasing ``key`` (ties in index order), each with its run of rows in order.
+
+    Returns ``(states, state_rows, position, rows, row_ptr, remaining)``: the states in
+    sweep order, the first layout row of each (and the end), for each layout row its
+    position in ``free_rows``, its model row, its first entry in the layout (and the end)
+    and its remaining mass ``1 - sum(l)``."""
+    n = free_rows.size
+    n_states = 0
+    for i in range(n):
+        if i == 0 or row_state[free_rows[i]] != row_state[free_rows[i - 1]]:
+            n_states += 1
+    first = np.empty(n_states + 1, dtype=np.int64)
+    keys = np.empty(n_states)
+    j = 0
+    for i in range(n):
+        if i == 0 or row_state[free_rows[i]] != row_state[free_rows[i - 1]]:
+            first[j] = i
+            keys[j] = key[row_state[free_rows[i]]]
+            j += 1
+    first[n_states] = n
+    by_key = np.argsort(keys, kind="mergesort")
+    states = np.empty(n_states, dtype=np.int64)
+    state_rows = np.empty(n_states + 1, dtype=np.int64)
+    position = np.empty(n, dtype=np.int64)
+    rows = np.empty(n, dtype=free_rows.dtype)
+    row_ptr = np.empty(n + 1, dtype=np.int64)
+    remaining = np.empty(n)
+    p = 0
+    e = 0
+    for j in range(n_states):
+        b = by_key[j]
+        states[j] = row_state[free_rows[first[b]]]
+        state_rows[j] = p
+        for i in range(first[b], first[b + 1]):
+            r = free_rows[i]
+            position[p] = i
+            rows[p] = r
+            row_ptr[p] = e
+            e += model_row_ptr[r + 1] - model_row_ptr[r]
+            remaining[p] = 1.0 - row_lower_sum[r]
+            p += 1
+    state_rows[n_states] = p
+    row_ptr[n] = e
+    return states, state_rows, position, rows, row_ptr, remaining

@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from planner._util.threads import concurrently, in_halves
 from planner.imdp.kernels.elimination import bounded_row_values, rise_since, rose
 from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep, light_sweep
-from planner.imdp.kernels.layers import layers
+from planner.imdp.kernels.layers import layers, sweep_order
 from planner.imdp.kernels.rows import (
     all_row_values,
     fill_layout,
@@ -29,7 +29,7 @@ from planner.imdp.kernels.rows import (
     row_distributions,
 )
 from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
-from planner.imdp.model import IMDP, first_of_runs
+from planner.imdp.model import IMDP
 
 ELIMINATE = True
 """Full sweeps of a maximising strategy skip rows by their last values
@@ -100,25 +100,11 @@ class ReachSweeper:
         m = model
         self.free_rows = free_rows
         """The free rows as given (sorted)."""
-        # the states in increasing key (a stable sort of the states, then each state's run
-        # of rows: the order of (key, row), without sorting the rows)
-        rs = m.row_state[free_rows]
-        first = first_of_runs(rs)
-        by_key = np.argsort(sweep_key[rs[first]], kind="stable")
-        starts = first[by_key]
-        lens = np.diff(np.append(first, rs.size))[by_key]
-        ptr = np.concatenate(([0], np.cumsum(lens)))
-        order = np.arange(rs.size) + np.repeat(starts - ptr[:-1], lens)
-        self._position = order
-        rows = free_rows[order]
+        # the free states in increasing key (a stable sort: ``states``), each with its run
+        # of rows (``rows``: the model row of every row of the layout)
+        order = sweep_order(free_rows, m.row_state, sweep_key, m.row_ptr, m.row_lower_sum)
+        self.states, self.state_rows, self._position, rows, self.row_ptr, self.remaining = order
         self.rows = rows
-        """The model row of every row of the layout."""
-        self.states = rs[starts].astype(np.int64)
-        """The free states in sweep order."""
-        self.state_rows = ptr.astype(np.int64)
-        lens = m.row_ptr[rows + 1] - m.row_ptr[rows]
-        self.row_ptr = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
-        self.remaining = 1.0 - m.row_lower_sum[rows]
         n_ent = int(self.row_ptr[-1])
         self.succ = np.empty(n_ent, dtype=np.int64)
         self.lower = np.empty(n_ent)

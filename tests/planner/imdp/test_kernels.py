@@ -783,3 +783,32 @@ def test_layers_in_either_direction_equal_a_top_down_search(dense):
         np.testing.assert_array_equal(layers(m, row_mask, sources), want)
         if dense:
             assert np.mean(want == 1.0) > 0.5
+
+
+def test_the_sweep_order_is_a_stable_sort_of_the_states_with_their_rows():
+    """The layout's index from one compiled pass equals its array definition: the states
+    of the free rows stably sorted by key (ties, including ``inf``, in index order), each
+    with its run of rows, their entry offsets and remaining masses."""
+    from planner.imdp.kernels.layers import sweep_order
+    from planner.imdp.model import first_of_runs
+
+    rng = np.random.default_rng(44)
+    for _ in range(20):
+        m = random_imdp(rng, n_states=60, n_actions=3, max_succ=5, zero_lower=True)
+        free = np.flatnonzero(rng.random(m.n_rows) < 0.7)
+        key = rng.integers(0, 4, m.n_states).astype(float)  # many ties
+        key[rng.random(m.n_states) < 0.1] = np.inf
+        states, state_rows, position, rows, row_ptr, remaining = sweep_order(
+            free, m.row_state, key, m.row_ptr, m.row_lower_sum
+        )
+        rs = m.row_state[free]
+        first = first_of_runs(rs)
+        want_states = rs[first][np.argsort(key[rs[first]], kind="stable")]
+        np.testing.assert_array_equal(states, want_states)
+        want_position = np.concatenate([np.flatnonzero(rs == s) for s in want_states])
+        np.testing.assert_array_equal(position, want_position)
+        np.testing.assert_array_equal(rows, free[want_position])
+        np.testing.assert_array_equal(np.diff(state_rows), [np.sum(rs == s) for s in states])
+        np.testing.assert_array_equal(np.diff(row_ptr), m.row_ptr[rows + 1] - m.row_ptr[rows])
+        np.testing.assert_array_equal(remaining, 1.0 - m.row_lower_sum[rows])
+        assert state_rows[0] == 0 and row_ptr[0] == 0
