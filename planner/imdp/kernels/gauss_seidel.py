@@ -33,7 +33,6 @@ def gauss_seidel_sweep(
     crit,
     v,
     best_row,
-    full,
     maximize,
     adversary_minimizes,
     bound,
@@ -51,9 +50,9 @@ def gauss_seidel_sweep(
 
     ``opt`` is max (``maximize``) or min over the state's rows; the adversary minimises
     (``adversary_minimizes``) or maximises. Each update reads the values written earlier in
-    the same sweep. ``full``: every row is evaluated and ``best_row[k]`` records the optimal
-    one; otherwise only the row ``best_row[k]`` is (a modified-policy-iteration sweep: for
-    a maximising strategy its update is at most the full one). Iterating from below
+    the same sweep. Every row is evaluated and ``best_row[k]`` records the optimal one (the
+    light sweeps between full ones, which evaluate only those rows, are
+    :func:`light_sweep`). Iterating from below
     (``V_0 <= T(V_0)``) every update is at most the least fixed point, so the values stay a
     sound lower bound; each update is lowered by its rounding bound
     (:func:`planner.imdp.kernels.rows.below`) so that this holds in floating point too.
@@ -62,7 +61,7 @@ def gauss_seidel_sweep(
     then run as parallel partial sums, 25-30 % faster on the 100 x 100 benchmark grid's
     rows of 9-25 entries, and that rounding bound holds for any order of the sums.
 
-    ``bound`` (full sweeps of a maximising strategy; empty: none): per layout row a value
+    ``bound`` (a maximising strategy; empty: none): per layout row a value
     at least the row's value at every ``V`` swept (the row cache of the passes from above,
     :func:`upper_sweep`, which holds row values at upper bounds). The last best row is
     evaluated first, and a row whose bound is below the best value found so far is skipped:
@@ -96,7 +95,7 @@ def gauss_seidel_sweep(
     sums in another order, and as a function called from several kernels its compiled
     variant depends on which was called first).
 
-    ``light`` (full sweeps; ``light_rows`` empty: none): the contiguous copy of one row
+    ``light`` (``light_rows`` empty: none): the contiguous copy of one row
     per state that light sweeps read (:func:`planner.imdp.kernels.rows.gather_rows`), its
     slot ``k + light_off`` a copy of the row ``light_rows[k]``. That row is evaluated from
     the copy and its critical successor copied back: the full layout holds a state's rows
@@ -111,22 +110,18 @@ def gauss_seidel_sweep(
     has_base = qbase.size > 0
     has_top = has_base and qmax.size > 0
     l_ptr, l_rem, l_succ, l_lower, l_gap, l_crit = light
-    prune = full and maximize and (has_bound or has_base)
+    prune = maximize and (has_bound or has_base)
     bound_skip = bounded.size > 0 and adversary_minimizes and has_base
     track = last.size > 0
     for k in range(states.size):
         s = states[k]
-        if full:
-            lo = state_rows[k]
-            hi = state_rows[k + 1]
-        else:
-            lo = best_row[k]
-            hi = lo + 1
+        lo = state_rows[k]
+        hi = state_rows[k + 1]
         best = -np.inf if maximize else np.inf
         arg = lo
         lrow = -1
         lq = 0.0
-        if full and light_rows.size > 0:
+        if light_rows.size > 0:
             # the last best row from its contiguous copy (the full layout lies scattered),
             # its critical successor copied back
             lrow = light_rows[k]
@@ -213,8 +208,7 @@ def gauss_seidel_sweep(
                 if (q > best) if maximize else (q < best):
                     best = q
                     arg = r
-        if full:
-            best_row[k] = arg
+        best_row[k] = arg
         old = v[s]
         best = below(best, arg, row_ptr)
         if best > old:
@@ -228,11 +222,12 @@ def gauss_seidel_sweep(
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
 def light_sweep(states, row_ptr, remaining, succ, lower, gap, crit, v, adversary_minimizes, last):
-    """A light sweep: :func:`gauss_seidel_sweep` with ``full`` false on the contiguous copy
-    of one row per state (row ``k`` of the copy belongs to ``states[k]``), in place;
-    returns the largest change. The same updates without that kernel's tests for the
-    strategy's rows and the bounds of a full sweep: the light sweeps of the random
-    100k-state benchmark model are most of its sweeps."""
+    """A light sweep: the Gauss-Seidel sweep of the contiguous copy of one row per state
+    (row ``k`` of the copy belongs to ``states[k]``), in place; returns the largest change.
+    A modified-policy-iteration sweep (for a maximising strategy its update is at most the
+    full one): :func:`gauss_seidel_sweep` of that copy as a layout of one row per state,
+    without that kernel's tests for the strategy's rows and the bounds of a full sweep
+    (the light sweeps of the random 100k-state benchmark model are most of its sweeps)."""
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
     residual = 0.0

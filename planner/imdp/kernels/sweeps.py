@@ -181,7 +181,7 @@ class ReachSweeper:
         that holds the earlier half's values as they were before the sweep, its values then
         copied into ``v``. Every value read is a lower bound, so every update is one, and
         the result does not depend on the threads' timing."""
-        sides = (True, self.maximize, self.adversary_minimizes, bound, self._qbase)
+        sides = (self.maximize, self.adversary_minimizes, bound, self._qbase)
         st, rows, best, top = self.states, self.state_rows, self.best_row, self._qmax
         light, slots = (self._light, self._light_rows) if self._light else (_NO_LIGHT, _NO_INDEX)
 

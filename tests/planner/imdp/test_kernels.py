@@ -423,7 +423,6 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
         sides = (
             True,
             True,
-            True,
             none,
             none,
             none,
@@ -624,7 +623,6 @@ def test_full_sweeps_read_the_best_rows_from_the_light_copy(seed):
             vv,
             best,
             True,
-            True,
             sw.adversary_minimizes,
         )
         none4 = (none, none, none, none, 0.0)
@@ -725,7 +723,8 @@ def test_sorting_a_row_by_rank_is_a_stable_sort(sign):
 def test_the_light_kernel_is_the_generic_sweep_of_the_best_rows(seed):
     """A light sweep (:func:`light_sweep`, the contiguous copy of the best rows) updates the
     values, critical successors and the record of written values as the generic kernel's
-    sweep of only the best rows does (``full`` false), up to the rounding of its sums."""
+    sweep of that copy as a layout of one row per state does, up to the rounding of its
+    sums."""
     from planner.imdp.kernels import gauss_seidel_sweep
     from planner.imdp.kernels.gauss_seidel import light_sweep
 
@@ -743,7 +742,8 @@ def test_the_light_kernel_is_the_generic_sweep_of_the_best_rows(seed):
         vv, light, last = v.copy(), tuple(a.copy() for a in sw._light), np.zeros(v.size)
         if generic:
             r = gauss_seidel_sweep(
-                sw.states, one, *light, vv, one, False, True, sw.adversary_minimizes,
+                sw.states, one, *light, vv, np.zeros(one.size, np.int64), True,
+                sw.adversary_minimizes,
                 none, none, none, last, 0.0, sweeps._NO_LIGHT, sweeps._NO_INDEX, 0,
                 sweeps._NO_FLAGS,
             )  # fmt: skip
