@@ -28,11 +28,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
-from planner.imdp.kernels import (
-    backward_distance,
-    chain_exit_residual,
-    counting_order,
-)
+from planner.imdp.kernels import chain_exit_residual, counting_order
+from planner.imdp.kernels.layers import layer_distance
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
 from planner.imdp.shown_below import shown_below
@@ -50,17 +47,23 @@ leftover of an adversary's distribution)."""
 
 def reaching(adj: sp.csr_matrix, seeds: np.ndarray) -> np.ndarray:
     """States with a path (edges ``adj > 0``) to a seed, seeds included: the breadth-first
-    search of the graph analyses (:func:`planner.imdp.kernels.backward_distance`), each
-    state its own row and the edges listed by target (:func:`counting_order`)."""
+    layers of the graph analyses (:func:`planner.imdp.kernels.layers.layer_distance`), each
+    state its own row, its edges listed by source (``adj``'s rows) and by target
+    (:func:`counting_order`)."""
     adj = sp.csr_matrix(adj)
     n = adj.shape[0]
     edge = adj.data > 0
     src = np.repeat(np.arange(n, dtype=np.int64), np.diff(adj.indptr))[edge]
     order, ptr = counting_order(adj.indices[edge].astype(np.int64), n)
     inc = src[order]  # each state is its own row, so an edge's row and state coincide
-    dist = backward_distance(
-        np.asarray(seeds, dtype=bool), np.ones(n, bool), ptr, inc, inc, np.ones(order.size), n
+    forward = (
+        np.arange(n + 1, dtype=np.int64),
+        adj.indptr.astype(np.int64),
+        adj.indices.astype(np.int64),
+        adj.data.astype(np.float64),
     )
+    seeds = np.asarray(seeds, dtype=bool)
+    dist = layer_distance(seeds, np.ones(n, bool), ptr, inc, inc, np.ones(order.size), *forward)
     return np.isfinite(dist)
 
 

@@ -15,7 +15,6 @@ from planner.imdp.kernels.rows import all_row_values, gather_rows
 from planner.imdp.kernels.search import (
     attractor,
     attractor_of_rows,
-    backward_distance,
     counting_order,
     forward_reach,
     incoming_index,
@@ -29,7 +28,6 @@ __all__ = [
     "all_row_values",
     "attractor",
     "attractor_of_rows",
-    "backward_distance",
     "chain_exit_residual",
     "component_exit_bound",
     "counting_order",

@@ -1,5 +1,6 @@
 """Breadth-first layers of a model towards a set of states (:func:`layers`), the order in
-which the Gauss-Seidel sweeps visit the states.
+which the Gauss-Seidel sweeps visit the states (and, on a chain's own edges, the states
+that reach a set: :func:`planner.imdp.evaluate.reaching`).
 
 The search goes level by level, each level in the cheaper direction (Beamer, Asanovic and
 Patterson, "Direction-optimizing breadth-first search", SC 2012): *top-down* it scans

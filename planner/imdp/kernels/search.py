@@ -251,38 +251,6 @@ def counting_order(keys, n_keys):
 
 
 @numba.njit(cache=True, nogil=True)
-def backward_distance(sources, row_mask, inc_ptr, inc_row, inc_state, inc_upper, limit):
-    """Breadth-first number of hops from each state to ``sources`` along ``upper > 0``
-    entries of the rows in ``row_mask`` (``inf`` where no path). ``inc_state``: the state
-    of each incoming entry's row (:meth:`planner.imdp.model.IMDP.reverse_index`), read
-    in order, so that an entry from a state already reached costs no lookup of its row.
-    ``limit``: how many states can be reached at most; the search ends once that many
-    are. (The sweeps' layers search level by level in either direction,
-    :func:`planner.imdp.kernels.layers.layers`.)"""
-    dist = np.full(sources.size, np.inf)
-    queue = np.empty(sources.size, dtype=np.int64)
-    tail = 0
-    for s in range(sources.size):
-        if sources[s]:
-            dist[s] = 0.0
-            queue[tail] = s
-            tail += 1
-    head = 0
-    while head < tail < limit:
-        t = queue[head]
-        head += 1
-        d = dist[t] + 1.0
-        for k in range(inc_ptr[t], inc_ptr[t + 1]):
-            s = inc_state[k]
-            if dist[s] != np.inf or inc_upper[k] <= 0.0 or not row_mask[inc_row[k]]:
-                continue
-            dist[s] = d
-            queue[tail] = s
-            tail += 1
-    return dist
-
-
-@numba.njit(cache=True, nogil=True)
 def forward_reach(sources, row_mask, state_ptr, row_ptr, successor, upper, allowed):
     """The ``allowed`` states reachable from ``sources & allowed`` along ``upper > 0``
     entries of the rows in ``row_mask`` of allowed states (breadth-first, a mask)."""
