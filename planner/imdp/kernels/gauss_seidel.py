@@ -97,11 +97,17 @@ def gauss_seidel_sweep(
 
     ``light`` (``light_rows`` empty: none): the contiguous copy of one row
     per state that light sweeps read (:func:`planner.imdp.kernels.rows.gather_rows`), its
-    slot ``k + light_off`` a copy of the row ``light_rows[k]``. That row is evaluated from
-    the copy and its critical successor copied back: the full layout holds a state's rows
-    side by side, so its best rows lie scattered there, and on the random 100k-state
-    benchmark model a late full sweep read them at 4.4x the cost of a light sweep (12 ms
-    against 2.7 ms, one thread; 4-5 ms from the copy).
+    slot ``k + light_off`` a copy of the row ``light_rows[k]`` (``-1``: none yet). That row
+    is evaluated from the copy and its critical successor copied back: the full layout
+    holds a state's rows side by side, so its best rows lie scattered there, and on the
+    random 100k-state benchmark model a late full sweep read them at 4.4x the cost of a
+    light sweep (12 ms against 2.7 ms, one thread; 4-5 ms from the copy). A state whose
+    best row changed copies the new one into its slot while it is in cache, where the
+    lengths agree (``light_rows[k]`` then names it), else marks the slot ``-1`` (the
+    caller gathers the copy anew): after the sweep the copy holds every state's best row
+    with its critical successor, as a fresh gather would, without a pass over the
+    scattered rows (on the random model that pass took 5-11 ms on one thread after the
+    first two full sweeps).
     """
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
@@ -113,19 +119,19 @@ def gauss_seidel_sweep(
     prune = maximize and (has_bound or has_base)
     bound_skip = bounded.size > 0 and adversary_minimizes and has_base
     track = last.size > 0
+    has_light = light_rows.size > 0
     for k in range(states.size):
         s = states[k]
         lo = state_rows[k]
         hi = state_rows[k + 1]
         best = -np.inf if maximize else np.inf
         arg = lo
-        lrow = -1
+        lrow = light_rows[k] if has_light else -1
         lq = 0.0
-        if light_rows.size > 0:
+        j = k + light_off
+        if lrow >= 0:
             # the last best row from its contiguous copy (the full layout lies scattered),
             # its critical successor copied back
-            lrow = light_rows[k]
-            j = k + light_off
             lq = threshold_value(j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
             if lq != lq:
                 lq = sorted_value(
@@ -209,6 +215,20 @@ def gauss_seidel_sweep(
                     best = q
                     arg = r
         best_row[k] = arg
+        if has_light and arg != lrow:
+            # the new best row into the state's slot of the copy, where it has the length
+            a = row_ptr[arg]
+            la = l_ptr[j]
+            if row_ptr[arg + 1] - a == l_ptr[j + 1] - la:
+                for e in range(row_ptr[arg + 1] - a):
+                    l_succ[la + e] = succ[a + e]
+                    l_lower[la + e] = lower[a + e]
+                    l_gap[la + e] = gap[a + e]
+                l_rem[j] = remaining[arg]
+                l_crit[j] = crit[arg] - a + la
+                light_rows[k] = arg
+            else:
+                light_rows[k] = -1
         old = v[s]
         best = below(best, arg, row_ptr)
         if best > old:

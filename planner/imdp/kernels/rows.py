@@ -296,32 +296,61 @@ def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
 
 
 @numba.njit(cache=True, nogil=True)
-def patch_rows(sel, old, row_ptr, remaining, succ, lower, gap, crit, light) -> int:
-    """:func:`gather_rows` of the rows ``sel`` into ``light``, the layout gathered for the
-    rows ``old``, in place: only the slots whose row changed are copied (the critical
-    successors of every slot are taken anew, as a fresh gather does), and ``old`` becomes
-    ``sel``. Returns the number of slots copied, or -1, with nothing changed, when a changed
-    row's length differs from its slot's (the layout must then be gathered anew)."""
-    new_ptr, rem2, succ2, lower2, gap2, crit2 = light
+def regather_rows(sel, slots, light, row_ptr, remaining, succ, lower, gap, crit):
+    """:func:`gather_rows` of the rows ``sel`` where ``light`` is a contiguous layout whose
+    slot ``k`` holds the row ``slots[k]`` (``-1``: none): a slot that already holds its row
+    is copied from there, in one sequential pass, and only the others from the layout's
+    scattered rows (after a full sweep that could not copy a best row of another length
+    into its slot)."""
+    o_ptr, o_rem, o_succ, o_lower, o_gap, o_crit = light
+    new_ptr = np.zeros(sel.size + 1, dtype=np.int64)
     for i in range(sel.size):
         r = sel[i]
-        if r != old[i] and row_ptr[r + 1] - row_ptr[r] != new_ptr[i + 1] - new_ptr[i]:
-            return -1
-    n = 0
+        new_ptr[i + 1] = new_ptr[i] + row_ptr[r + 1] - row_ptr[r]
+    n = new_ptr[-1]
+    succ2 = np.empty(n, dtype=np.int64)
+    lower2 = np.empty(n)
+    gap2 = np.empty(n)
+    crit2 = np.empty(sel.size, dtype=np.int64)
+    rem2 = np.empty(sel.size)
     for i in range(sel.size):
         r = sel[i]
-        off = new_ptr[i] - row_ptr[r]
-        crit2[i] = crit[r] + off
-        if r == old[i]:
-            continue
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            succ2[e + off] = succ[e]
-            lower2[e + off] = lower[e]
-            gap2[e + off] = gap[e]
-        rem2[i] = remaining[r]
-        old[i] = r
-        n += 1
-    return n
+        a = new_ptr[i]
+        if slots[i] == r:
+            off = a - o_ptr[i]
+            for e in range(o_ptr[i], o_ptr[i + 1]):
+                succ2[e + off] = o_succ[e]
+                lower2[e + off] = o_lower[e]
+                gap2[e + off] = o_gap[e]
+            crit2[i] = o_crit[i] + off
+            rem2[i] = o_rem[i]
+        else:
+            off = a - row_ptr[r]
+            for e in range(row_ptr[r], row_ptr[r + 1]):
+                succ2[e + off] = succ[e]
+                lower2[e + off] = lower[e]
+                gap2[e + off] = gap[e]
+            crit2[i] = crit[r] + off
+            rem2[i] = remaining[r]
+    return new_ptr, rem2, succ2, lower2, gap2, crit2
+
+
+def empty_slots(sel, row_ptr) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    """A contiguous layout with one slot per row of ``sel`` (its length), unfilled, and its
+    index of rows, ``-1`` everywhere (no slot holds a row yet): the light copy before the
+    first full sweep fills it (:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`)."""
+    ptr = np.zeros(sel.size + 1, dtype=np.int64)
+    np.cumsum(row_ptr[sel + 1] - row_ptr[sel], out=ptr[1:])
+    n = int(ptr[-1])
+    layout = (
+        ptr,
+        np.empty(sel.size),
+        np.empty(n, dtype=np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty(sel.size, dtype=np.int64),
+    )
+    return layout, np.full(sel.size, -1, dtype=np.int64)
 
 
 @numba.njit(cache=True, nogil=True)

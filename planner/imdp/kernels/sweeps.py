@@ -24,8 +24,8 @@ from planner.imdp.kernels.layers import layers, sweep_order
 from planner.imdp.kernels.rows import (
     all_row_values,
     fill_layout,
-    gather_rows,
-    patch_rows,
+    empty_slots,
+    regather_rows,
     row_distributions,
 )
 from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
@@ -152,13 +152,14 @@ class ReachSweeper:
         self._track(v)
         if full or self._light is None:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
+            if self._light is None:
+                # slots as long as the best rows, filled by the sweep (gauss_seidel_sweep)
+                self._light, self._light_rows = empty_slots(self.best_row, self.row_ptr)
             residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
-            if (
-                self._light is None
-                or patch_rows(self.best_row, self._light_rows, *layout, self._light) < 0
-            ):
+            if self._light_rows.size and self._light_rows.min() < 0:
+                # a best row of another length than its slot
+                self._light = regather_rows(self.best_row, self._light_rows, self._light, *layout)
                 self._light_rows = self.best_row.copy()
-                self._light = gather_rows(self.best_row, *layout)
         else:
             residual = float(
                 light_sweep(self.states, *self._light, v, self.adversary_minimizes, self._last)
@@ -183,7 +184,7 @@ class ReachSweeper:
         the result does not depend on the threads' timing."""
         sides = (self.maximize, self.adversary_minimizes, bound, self._qbase)
         st, rows, best, top = self.states, self.state_rows, self.best_row, self._qmax
-        light, slots = (self._light, self._light_rows) if self._light else (_NO_LIGHT, _NO_INDEX)
+        light, slots = self._light, self._light_rows
 
         def part(first: int, last: int, values: np.ndarray) -> float:
             # the states first:last of the sweep order, on ``values``

@@ -337,44 +337,64 @@ def test_full_sweeps_skip_rows_bounded_below_the_best_and_nothing_else_changes(s
     assert (pruned.best_row != plain.best_row).any()
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_patched_light_layout_equals_a_fresh_gather(seed):
-    from planner.imdp.kernels.rows import gather_rows, patch_rows
+def _equal_rows_imdp(rng: np.random.Generator, n: int, k: int) -> IMDP:
+    """Three actions per state, every row ``k`` distinct successors (an interval around a
+    random distribution), 10 % of the states labelled goal."""
+    succ = np.stack([rng.choice(n, size=k, replace=False) for _ in range(3 * n)])
+    p = rng.dirichlet(np.ones(k), size=3 * n)
+    lower = p * rng.uniform(0.3, 1.0, size=p.shape)
+    upper = np.minimum(1.0, p + rng.uniform(0.0, 0.3, size=p.shape))
+    labels = [("goal",) if x < 0.1 else () for x in rng.random(n)]
+    return IMDP(
+        n,
+        np.repeat(np.arange(n), 3 * k),
+        np.tile(np.repeat(np.arange(3), k), n),
+        succ.ravel(),
+        lower.ravel(),
+        upper.ravel(),
+        n_actions=3,
+        labels=labels,
+    )
 
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("equal_rows", [True, False])
+def test_full_sweeps_keep_the_light_copy_a_gather_of_the_best_rows(seed, equal_rows, monkeypatch):
+    """After every full sweep the light copy equals a fresh gather of the best rows at the
+    current critical successors. The sweep copies a changed best row into its slot where
+    the lengths agree (rows all of 4 entries: the copy is never gathered, even the first
+    sweep fills its slots), and where they do not the copy is gathered anew (rows of 1-6
+    entries), the slots that kept their rows from the copy itself."""
+    from planner.imdp.kernels.rows import gather_rows, regather_rows
+
+    gathers = []
+    monkeypatch.setattr(
+        sweeps, "regather_rows", lambda *a: gathers.append(a[1].copy()) or regather_rows(*a)
+    )
     rng = np.random.default_rng(300 + seed)
-    m = random_imdp(rng, 40, 3, 4)
-    sw = _sweeper(m, True)
+    if equal_rows:
+        m = _equal_rows_imdp(rng, 60, 4)
+    else:
+        m = random_imdp(rng, n_states=60, n_actions=3, max_succ=6, zero_lower=bool(seed % 2))
+    sw = _sweeper(m, seed < 2)
     layout = (sw.row_ptr, sw.remaining, sw.succ, sw.lower, sw.gap)
-    lens = np.diff(sw.row_ptr)
-    first = sw.state_rows[:-1].copy()
-    light = gather_rows(first, *layout, sw.crit)
-    old = first.copy()
-    patched_any = refreshed = 0
-    for step in range(8):
-        sw.crit = sw.row_ptr[:-1] + rng.integers(0, lens)  # other critical successors
-        sel = old.copy()
-        for k in np.flatnonzero(rng.random(sel.size) < 0.4):
-            rows = np.arange(sw.state_rows[k], sw.state_rows[k + 1])
-            if step % 2 == 0:  # even steps keep each slot's length
-                rows = rows[lens[rows] == lens[old[k]]]
-            sel[k] = rng.choice(rows)
-        before = tuple(a.copy() for a in light)
-        prev = old.copy()
-        n = patch_rows(sel, old, *layout, sw.crit, light)
-        if n < 0:
-            # a changed row of another length: nothing touched, a fresh gather is needed
-            assert np.array_equal(old, prev)
-            refreshed += 1
-            assert all(np.array_equal(a, b) for a, b in zip(light, before, strict=True))
-            light = gather_rows(sel, *layout, sw.crit)
-            old = sel.copy()
-            continue
-        patched_any += n
-        assert np.array_equal(old, sel) and n == int((sel != prev).sum())
-        fresh = gather_rows(sel, *layout, sw.crit)
-        for a, b in zip(light, fresh, strict=True):
-            np.testing.assert_array_equal(a, b)
-    assert patched_any > 0 and refreshed > 0
+    v = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    changed = 0
+    for step in range(10):
+        before = sw.best_row.copy()
+        if step % 3 == 2:  # values jump: other best rows
+            v = np.maximum(v, 0.9 * rng.random(v.size) * (v < 1.0))
+        sw.sweep(v, True)
+        changed += int((before != sw.best_row).sum())
+        np.testing.assert_array_equal(sw._light_rows, sw.best_row)
+        fresh = gather_rows(sw.best_row, *layout, sw.crit)
+        for got, want in zip(sw._light, fresh, strict=True):
+            np.testing.assert_array_equal(got, want)
+    assert changed > 20
+    if equal_rows:
+        assert not gathers
+    else:  # gathered anew where a slot lost its row, from the copy where it kept it
+        assert gathers and all((g < 0).any() and (g >= 0).any() for g in gathers)
 
 
 def test_row_sum_signs_match_exactly_rounded_sums():
@@ -639,9 +659,12 @@ def test_full_sweeps_read_the_best_rows_from_the_light_copy(seed):
     np.testing.assert_allclose(v1, v0, rtol=0.0, atol=1e-15)
     np.testing.assert_array_equal(b1, b0)
     assert abs(r1 - r0) <= 1e-15 and r1 > 0.0
-    # the copied-back critical successors are those of the light copy
-    fresh = gather_rows(sw._light_rows, *layout, crit1)
-    np.testing.assert_array_equal(fresh[5], light1[5])
+    # the copied-back critical successors are those of the light copy; a slot whose best
+    # row changed holds the new row (or, of another length, is marked -1)
+    held = np.where(slots >= 0, slots, sw._light_rows)
+    fresh = gather_rows(held, *layout, crit1)
+    assert np.array_equal(slots[slots >= 0], b1[slots >= 0])
+    np.testing.assert_array_equal(fresh[5][slots >= 0], light1[5][slots >= 0])
 
 
 @pytest.mark.parametrize("zero_lower", [True, False])
