@@ -23,8 +23,8 @@ from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep, light_sweep
 from planner.imdp.kernels.layers import layers, sweep_order
 from planner.imdp.kernels.rows import (
     all_row_values,
-    fill_layout,
     empty_slots,
+    fill_layout,
     regather_rows,
     row_distributions,
 )
