@@ -70,8 +70,8 @@ class ReachSweeper:
     """The compact, sweep-ordered layout of the free rows of a model, and its sweeps.
 
     Full sweeps evaluate every row and record each state's best row; light sweeps
-    evaluate only those rows, from a contiguous copy made after the last full sweep (the
-    best rows lie scattered in the full layout, which makes them slow to read).
+    evaluate only those rows, from a contiguous copy that the full sweeps keep (the best
+    rows lie scattered in the full layout, which makes them slow to read).
 
     Args:
         model: the interval MDP.
@@ -145,7 +145,7 @@ class ReachSweeper:
         rows (``full``; those whose ``bound``, a per-row upper bound such as the row cache
         of the passes from above, is below the best found are skipped; from
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
-        the best rows of the last full sweep, from their contiguous copy
+        the best rows of the last full sweep, from the contiguous copy it kept
         (:func:`light_sweep`)."""
         if self.before_sweep is not None:
             self.before_sweep()
