@@ -270,29 +270,20 @@ def fill_layout(first, last, sel, model_ptr, successor, lower, upper, ptr, succ,
             gap[e + off] = upper[e] - lower[e]
 
 
-@numba.njit(cache=True, nogil=True)
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
-    new_ptr = np.zeros(sel.size + 1, dtype=np.int64)
-    for i in range(sel.size):
-        r = sel[i]
-        new_ptr[i + 1] = new_ptr[i] + row_ptr[r + 1] - row_ptr[r]
-    n = new_ptr[-1]
-    succ2 = np.empty(n, dtype=np.int64)
-    lower2 = np.empty(n)
-    gap2 = np.empty(n)
-    crit2 = np.empty(sel.size, dtype=np.int64)
-    rem2 = np.empty(sel.size)
-    for i in range(sel.size):
-        r = sel[i]
-        off = new_ptr[i] - row_ptr[r]
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            succ2[e + off] = succ[e]
-            lower2[e + off] = lower[e]
-            gap2[e + off] = gap[e]
-        crit2[i] = crit[r] + off
-        rem2[i] = remaining[r]
-    return new_ptr, rem2, succ2, lower2, gap2, crit2
+    slots = np.full(sel.size, -1, dtype=np.int64)
+    return regather_rows(sel, slots, _NO_SLOTS, row_ptr, remaining, succ, lower, gap, crit)
+
+
+_NO_SLOTS = (
+    np.zeros(1, dtype=np.int64),
+    np.empty(0),
+    np.empty(0, dtype=np.int64),
+    np.empty(0),
+    np.empty(0),
+    np.empty(0, dtype=np.int64),
+)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -315,23 +306,18 @@ def regather_rows(sel, slots, light, row_ptr, remaining, succ, lower, gap, crit)
     rem2 = np.empty(sel.size)
     for i in range(sel.size):
         r = sel[i]
-        a = new_ptr[i]
         if slots[i] == r:
-            off = a - o_ptr[i]
-            for e in range(o_ptr[i], o_ptr[i + 1]):
-                succ2[e + off] = o_succ[e]
-                lower2[e + off] = o_lower[e]
-                gap2[e + off] = o_gap[e]
-            crit2[i] = o_crit[i] + off
-            rem2[i] = o_rem[i]
+            s_succ, s_lower, s_gap, first, last = o_succ, o_lower, o_gap, o_ptr[i], o_ptr[i + 1]
+            c, rem2[i] = o_crit[i], o_rem[i]
         else:
-            off = a - row_ptr[r]
-            for e in range(row_ptr[r], row_ptr[r + 1]):
-                succ2[e + off] = succ[e]
-                lower2[e + off] = lower[e]
-                gap2[e + off] = gap[e]
-            crit2[i] = crit[r] + off
-            rem2[i] = remaining[r]
+            s_succ, s_lower, s_gap, first, last = succ, lower, gap, row_ptr[r], row_ptr[r + 1]
+            c, rem2[i] = crit[r], remaining[r]
+        off = new_ptr[i] - first
+        for e in range(first, last):
+            succ2[e + off] = s_succ[e]
+            lower2[e + off] = s_lower[e]
+            gap2[e + off] = s_gap[e]
+        crit2[i] = c + off
     return new_ptr, rem2, succ2, lower2, gap2, crit2
 
 
