@@ -136,6 +136,9 @@ class ReachSweeper:
         self._bounded = np.zeros(self._qbase.size, dtype=np.bool_)
         self._last = self._no_cache
         self._rise = 0.0
+        # the values and the sum of rises at the start of the last full sweep
+        self._snap = self._no_cache
+        self._snap_rise = 0.0
         # the first state of the later half of a full sweep in halves (0: whole)
         half = np.searchsorted(self.state_rows, np.searchsorted(self.row_ptr, n_ent // 2))
         self._cut = int(half) if n_ent >= HALVES_SWEEP_ENTRIES and half < self.states.size else 0
@@ -151,6 +154,7 @@ class ReachSweeper:
             self.before_sweep()
         self._track(v)
         if full or self._light is None:
+            self._tighten(v, snap=True)
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
             if self._light is None:
                 # slots as long as the best rows, filled by the sweep (gauss_seidel_sweep)
@@ -166,6 +170,25 @@ class ReachSweeper:
             )
         self._rise = rose(self._rise, residual)
         return residual
+
+    def _tighten(self, v: np.ndarray, snap: bool = False) -> None:
+        """Lower the sum of rises to its value at the start of the last full sweep plus the
+        largest rise of a value since then, where that is less (``snap``: then keep ``v``
+        as that start). A row's ``qbase`` was stored in a full sweep, relative to the sum
+        at its start, from values at least those at its start, so it stays a bound: a rise
+        of at most ``max(V' - V)`` since the last full sweep, which started a sum of rises
+        that covered every earlier one, covers every later one (the largest rise over two
+        spans is at most the sum of theirs). The sweeps between full ones add their
+        residuals, the largest change of each, which overstates this when different states
+        rise most in different sweeps."""
+        if not self._qbase.size:
+            return
+        if self._snap.size == v.size:
+            since = float(np.max(v - self._snap, initial=0.0))
+            self._rise = min(self._rise, rose(self._snap_rise, since))
+        if snap:
+            self._snap = v.copy()
+            self._snap_rise = self._rise
 
     def _track(self, v: np.ndarray) -> None:
         """The rise of ``v`` since the values after the last sweep added to the sum of rises
@@ -325,6 +348,7 @@ class ReachSweeper:
         bounded = slack is not None and self._qbase.size > 0 and self._last.size == v.size
         if bounded:
             self._track(v)
+            self._tighten(v)
             work = self.row_ptr[self.state_rows]
             args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
             # the best rows from the light sweeps' copy, as the full sweeps read them

@@ -597,6 +597,36 @@ def test_skipping_rows_by_their_last_values_changes_no_sweep(seed, monkeypatch):
     assert (~near).sum() > 0 and (qb[~near] != q[~near]).any()
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_full_sweep_lowers_the_sum_of_rises_to_the_largest_rise_since_the_last(
+    seed, monkeypatch
+):
+    """At a full sweep the sum of rises becomes, where that is less, its value at the start
+    of the last full sweep plus the largest rise of a value since: it skips more rows (the
+    sweeps in between add the largest change of each, from different states), the values
+    and best rows staying those of the sweeps without it (the skipping test above checks
+    them against sweeps that skip nothing)."""
+    rng = np.random.default_rng(40 + seed)
+    m = random_imdp(rng, n_states=150, n_actions=5, max_succ=6, zero_lower=bool(seed % 2))
+    tight = _sweeper(m, True)
+    loose = _sweeper(m, True)
+    monkeypatch.setattr(loose, "_tighten", lambda v, snap=False: None)
+    a = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    b = a.copy()
+    lowered = 0
+    for step in range(30):
+        full = step % 4 == 0
+        assert tight.sweep(a, full) == loose.sweep(b, full)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(tight.best_row, loose.best_row)
+        assert tight._rise <= loose._rise
+        if full and step > 0:
+            # the sum at the start of the last full sweep, plus the largest rise since
+            assert tight._rise >= tight._snap_rise
+            lowered += tight._rise < loose._rise
+    assert lowered > 0
+
+
 def test_the_sum_of_rises_never_falls_below_the_exact_sum():
     """``rose`` rounds every addition up, so the skipping bound's ``c`` stays at least the
     exact sum of the rises however many are added (a float sum falls below it)."""
