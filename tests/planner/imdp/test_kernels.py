@@ -598,9 +598,7 @@ def test_skipping_rows_by_their_last_values_changes_no_sweep(seed, monkeypatch):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_a_full_sweep_lowers_the_sum_of_rises_to_the_largest_rise_since_the_last(
-    seed, monkeypatch
-):
+def test_a_full_sweep_lowers_the_sum_of_rises_to_the_largest_rise_since_the_last(seed, monkeypatch):
     """At a full sweep the sum of rises becomes, where that is less, its value at the start
     of the last full sweep plus the largest rise of a value since: it skips more rows (the
     sweeps in between add the largest change of each, from different states), the values
