@@ -239,7 +239,16 @@ def maximal_end_components_kernel(
         if m == 0:
             continue
         # local graph and its SCCs
+        # in one pass, into room for every entry of the live rows
+        room = 0
+        for i in range(m):
+            s = members[i]
+            for r in range(st_ptr[s], st_ptr[s + 1]):
+                if rows[r]:
+                    room += row_ptr[r + 1] - row_ptr[r]
         deg = np.zeros(m + 1, dtype=np.int64)
+        adj = np.empty(room, dtype=np.int64)
+        filled = 0
         for i in range(m):
             s = members[i]
             tick += 1
@@ -249,22 +258,9 @@ def maximal_end_components_kernel(
                         t = successor[e]
                         if upper[e] > 0.0 and alive[t] and comp[t] == c and seen[t] != tick:
                             seen[t] = tick
-                            deg[i + 1] += 1
-        for i in range(m):
-            deg[i + 1] += deg[i]
-        pos = deg[:-1].copy()
-        adj = np.empty(deg[m], dtype=np.int64)
-        for i in range(m):
-            s = members[i]
-            tick += 1
-            for r in range(st_ptr[s], st_ptr[s + 1]):
-                if rows[r]:
-                    for e in range(row_ptr[r], row_ptr[r + 1]):
-                        t = successor[e]
-                        if upper[e] > 0.0 and alive[t] and comp[t] == c and seen[t] != tick:
-                            seen[t] = tick
-                            adj[pos[i]] = local_index[t]
-                            pos[i] += 1
+                            adj[filled] = local_index[t]
+                            filled += 1
+            deg[i + 1] = filled
         sub = _tarjan(m, np.ones(m, dtype=np.bool_), deg, adj)
         n_sub = sub.max() + 1
         for i in range(m):
