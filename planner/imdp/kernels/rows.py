@@ -270,13 +270,7 @@ def fill_layout(first, last, sel, model_ptr, successor, lower, upper, ptr, succ,
             gap[e + off] = upper[e] - lower[e]
 
 
-def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
-    """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
-    slots = np.full(sel.size, -1, dtype=np.int64)
-    return regather_rows(sel, slots, _NO_SLOTS, row_ptr, remaining, succ, lower, gap, crit)
-
-
-_NO_SLOTS = (
+NO_LAYOUT = (
     np.zeros(1, dtype=np.int64),
     np.empty(0),
     np.empty(0, dtype=np.int64),
@@ -284,6 +278,14 @@ _NO_SLOTS = (
     np.empty(0),
     np.empty(0, dtype=np.int64),
 )
+"""A contiguous layout of no rows, ``(ptr, remaining, succ, lower, gap, crit)``: where a
+kernel takes a light copy, none."""
+
+
+def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
+    """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
+    slots = np.full(sel.size, -1, dtype=np.int64)
+    return regather_rows(sel, slots, NO_LAYOUT, row_ptr, remaining, succ, lower, gap, crit)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -22,6 +22,7 @@ from planner.imdp.kernels.elimination import bounded_row_values, rise_since, ros
 from planner.imdp.kernels.gauss_seidel import gauss_seidel_sweep, light_sweep
 from planner.imdp.kernels.layers import layers, sweep_order
 from planner.imdp.kernels.rows import (
+    NO_LAYOUT,
     all_row_values,
     empty_slots,
     fill_layout,
@@ -56,14 +57,6 @@ the certified solve 1.5-1.8x slower."""
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
 _NO_INDEX = np.empty(0, dtype=np.int64)
 _NO_FLAGS = np.empty(0, dtype=np.bool_)
-_NO_LIGHT = (
-    np.zeros(1, dtype=np.int64),
-    np.empty(0),
-    _NO_INDEX,
-    np.empty(0),
-    np.empty(0),
-    _NO_INDEX,
-)
 
 
 class ReachSweeper:
@@ -124,7 +117,7 @@ class ReachSweeper:
         self.maximize = bool(maximize)
         self.adversary_minimizes = bool(adversary_minimizes)
         self._light: tuple[np.ndarray, ...] | None = None
-        self._light_rows = self.best_row
+        self._light_rows = _NO_INDEX  # the best row in each slot of the copy
         self.before_sweep: Callable[[], None] | None = None
         """Called before each sweep from below (to abandon the sweeps, it raises)."""
         self._no_cache = np.empty(0)
@@ -352,7 +345,7 @@ class ReachSweeper:
             work = self.row_ptr[self.state_rows]
             args = (self.state_rows, self.best_row, self._qbase, self._rise, float(slack))
             # the best rows from the light sweeps' copy, as the full sweeps read them
-            light = _NO_LIGHT if self._light is None else self._light
+            light = NO_LAYOUT if self._light is None else self._light
 
             def fill(first: int, last: int) -> None:
                 bounded_row_values(

@@ -453,7 +453,7 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
             none,
             none,
             0.0,
-            sweeps._NO_LIGHT,
+            sweeps.NO_LAYOUT,
             sweeps._NO_INDEX,
             0,
             sweeps._NO_FLAGS,
@@ -680,7 +680,7 @@ def test_full_sweeps_read_the_best_rows_from_the_light_copy(seed):
         )
         none4 = (none, none, none, none, 0.0)
         r = gauss_seidel_sweep(
-            *args, *none4, light if use_light else sweeps._NO_LIGHT, slots, 0, sweeps._NO_FLAGS
+            *args, *none4, light if use_light else sweeps.NO_LAYOUT, slots, 0, sweeps._NO_FLAGS
         )
         results.append((r, vv, best, crit, light))
     (r0, v0, b0, _, _), (r1, v1, b1, crit1, light1) = results
@@ -800,7 +800,7 @@ def test_the_light_kernel_is_the_generic_sweep_of_the_best_rows(seed):
             r = gauss_seidel_sweep(
                 sw.states, one, *light, vv, np.zeros(one.size, np.int64), True,
                 sw.adversary_minimizes,
-                none, none, none, last, 0.0, sweeps._NO_LIGHT, sweeps._NO_INDEX, 0,
+                none, none, none, last, 0.0, sweeps.NO_LAYOUT, sweeps._NO_INDEX, 0,
                 sweeps._NO_FLAGS,
             )  # fmt: skip
         else:
