@@ -29,6 +29,7 @@ from scipy.sparse.linalg import splu
 
 from planner.imdp import graph
 from planner.imdp.kernels import chain_exit_residual, counting_order
+from planner.imdp.kernels.chains import exit_matrix, split_chain
 from planner.imdp.kernels.layers import layer_distance
 from planner.imdp.model import IMDP
 from planner.imdp.ordering import OrderingAdversary
@@ -163,7 +164,9 @@ def chain_lu(
     """Sparse LU of ``A = I - sub`` for a substochastic ``sub`` (rows summing to at most 1)
     whose chain leaves from every state (``A`` non-singular). ``exits``: each row's mass
     leaving its own state, summed from those entries; the diagonal is then ``exits``
-    instead of ``1 - sub_ss`` (which keeps nothing of a leak below ``eps``).
+    instead of ``1 - sub_ss`` (which keeps nothing of a leak below ``eps``). ``A`` is
+    assembled by :func:`planner.imdp.kernels.chains.exit_matrix` (no row of ``sub`` may
+    list a column twice).
 
     ``A`` is then a non-singular M-matrix, weakly diagonally dominant by rows; Gaussian
     elimination keeps both properties in every Schur complement, so its pivots are positive
@@ -175,15 +178,27 @@ def chain_lu(
     one chain serves every chain of the same sparsity pattern (``orderings``:
     :class:`ChainOrderings`).
     """
+    sub = sp.csr_matrix(sub)
     if exits is None:
-        a = (sp.identity(sub.shape[0], format="csc") - sub).tocsc()
-    else:
-        off = sp.csr_matrix(sub, copy=True)
-        off.data[off.indices == np.repeat(np.arange(off.shape[0]), np.diff(off.indptr))] = 0.0
-        a = (sp.diags(exits, format="csr") - off).tocsc()
+        exits = 1.0 - sub.diagonal()
     if orderings is not None:
-        return orderings.factor(a)
-    return _symmetric_lu(a, "MMD_AT_PLUS_A")
+        return orderings.factor(sub, exits)
+    return _symmetric_lu(_exit_matrix(sub, exits), "MMD_AT_PLUS_A")
+
+
+def _exit_matrix(sub: sp.csr_matrix, exits: np.ndarray, perm: np.ndarray | None = None):
+    """``diag(exits) - sub`` off its diagonal, symmetrically permuted by ``perm`` (old index
+    of each new one; none by default), in compressed columns."""
+    n = sub.shape[0]
+    perm = np.arange(n, dtype=np.int64) if perm is None else perm
+    ptr, idx, val = exit_matrix(
+        sub.indptr.astype(np.int64),
+        sub.indices.astype(np.int64),
+        sub.data.astype(np.float64),
+        np.asarray(exits, dtype=np.float64),
+        perm,
+    )
+    return sp.csc_matrix((val, idx, ptr), shape=(n, n))
 
 
 def _symmetric_lu(a: sp.csc_matrix, permc_spec: str):
@@ -221,8 +236,9 @@ class ChainOrderings:
         self.reused = 0
         """Factorisations that reused an ordering."""
 
-    def factor(self, a: sp.csc_matrix):
-        a.sort_indices()
+    def factor(self, sub: sp.csr_matrix, exits: np.ndarray):
+        """The LU of :func:`chain_lu` for ``sub`` and ``exits``."""
+        a = _exit_matrix(sub, exits)
         pattern = self._pattern
         if (
             pattern is not None
@@ -231,7 +247,7 @@ class ChainOrderings:
         ):
             self.reused += 1
             perm = self._perm
-            return _PermutedLU(_symmetric_lu(a[perm][:, perm].tocsc(), "NATURAL"), perm)
+            return _PermutedLU(_symmetric_lu(_exit_matrix(sub, exits, perm), "NATURAL"), perm)
         lu = _symmetric_lu(a, "MMD_AT_PLUS_A")
         self._pattern = (a.indptr.copy(), a.indices.copy())
         self._perm = np.empty(a.shape[0], dtype=np.int64)
@@ -267,38 +283,47 @@ def chain_reach(
     """
     # float dust of the adversary's leftover mass (1e-16) can link a closed class to the
     # target: the class counts as live and ``I - sub`` is singular. Dropping mass below
-    # DUST only lowers the least solution, so the value stays a lower bound.
-    matrix = sp.csr_matrix(matrix, copy=True)
-    dust = matrix.data < DUST
-    # each state's stay on itself is implied by what leaves it (slow leaks keep their
-    # relative precision in the matrix and in the residuals); the dust that leaves goes to
-    # value 0, not back to the state
-    leaves = matrix.indices != np.repeat(states, np.diff(matrix.indptr))
-    lost = _row_sums(matrix.indptr, np.where(dust & leaves, matrix.data, 0.0))
-    kept = _row_sums(matrix.indptr, np.where(leaves & ~dust, matrix.data, 0.0))
-    matrix.data[dust] = 0.0
-    matrix.eliminate_zeros()
+    # DUST only lowers the least solution, so the value stays a lower bound. Each state's
+    # stay on itself is implied by what leaves it (slow leaks keep their relative
+    # precision in the matrix and in the residuals); the dust that leaves goes to value 0,
+    # not back to the state.
+    matrix = sp.csr_matrix(matrix)
+    states = np.asarray(states, dtype=np.int64)
+    n_states = matrix.shape[1]
+    pos = np.full(n_states, -1, dtype=np.int64)
+    pos[states] = np.arange(states.size)
     base = np.asarray(fixed_val, dtype=np.float64).copy()
     base[states] = 0.0
-    b = matrix @ base
-    inner = matrix[:, states].tocsr()
-    inner.eliminate_zeros()
+    k_ptr, k_idx, k_val, i_ptr, i_idx, i_val, lost, kept, b = split_chain(
+        matrix.indptr.astype(np.int64),
+        matrix.indices.astype(np.int64),
+        matrix.data.astype(np.float64),
+        states,
+        pos,
+        base,
+        DUST,
+    )
+    inner = sp.csr_matrix((i_val, i_idx, i_ptr), shape=(states.size, states.size))
     live = np.flatnonzero(reaching(inner, b > 0))
     out = base
     err = ChainError(base.size, live, states[live], None, np.zeros(0))
     if live.size:
-        own = states[live].astype(np.int64)
-        rows = matrix[live].tocsr()
-        indptr, indices = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+        own = states[live]
+        rows, sub = sp.csr_matrix((k_val, k_idx, k_ptr), shape=(states.size, n_states)), inner
+        if live.size < states.size:
+            rows, sub = rows[live], inner[live][:, live]
+        indptr = np.asarray(rows.indptr, dtype=np.int64)
+        indices = np.asarray(rows.indices, dtype=np.int64)
+        data = rows.data
         lost_live = lost[live]
-        lu = chain_lu(inner[live][:, live], orderings, kept[live] + lost_live)
+        lu = chain_lu(sub, orderings, kept[live] + lost_live)
         out[own] = lu.solve(b[live])
-        r = chain_exit_residual(indptr, indices, rows.data, out, own, lost_live)
+        r = chain_exit_residual(indptr, indices, data, out, own, lost_live)
         for _ in range(_REFINE):
             if not np.any(r):
                 break
             out[own] += lu.solve(r)
-            r_new = chain_exit_residual(indptr, indices, rows.data, out, own, lost_live)
+            r_new = chain_exit_residual(indptr, indices, data, out, own, lost_live)
             if np.max(np.abs(r_new)) >= np.max(np.abs(r)):
                 r = r_new
                 break

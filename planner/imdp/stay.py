@@ -86,7 +86,7 @@ def leaving_mass(matrix: sp.csr_matrix, states: np.ndarray) -> np.ndarray:
     return sp.csr_matrix(matrix) @ outside
 
 
-def _inner_rows(
+def inner_rows(
     matrix: sp.csr_matrix, row_states: np.ndarray
 ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     """The candidate rows restricted to their own states (mass elsewhere leaves), columns
@@ -106,7 +106,10 @@ def _inner_rows(
 
 
 def surest_exit_start(
-    matrix: sp.csr_matrix, row_states: np.ndarray, fallback: np.ndarray | None = None
+    matrix: sp.csr_matrix,
+    row_states: np.ndarray,
+    fallback: np.ndarray | None = None,
+    inner: tuple[sp.csr_matrix, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Per state one of the candidate rows (``matrix``: one distribution per candidate,
     over all states; ``row_states`` their states, sorted, at least one per state) whose
@@ -114,8 +117,8 @@ def surest_exit_start(
     :func:`planner.imdp.kernels.surest_exit_choice` (rows with the largest one-step mass
     towards the exit), a good start for :func:`shortest_stay`; ``fallback`` (a
     candidate index per state) where no path leaves, -1 there without one. Returns
-    candidate indices."""
-    inner, states, leak = _inner_rows(matrix, row_states)
+    candidate indices. ``inner``: :func:`inner_rows` of these arguments, if at hand."""
+    inner, states, leak = inner_rows(matrix, row_states) if inner is None else inner
     local = run_ids(np.asarray(row_states, dtype=np.int64))
     coo = inner.tocoo()
     order, ptr = counting_order(coo.col.astype(np.int64), states.size)
@@ -216,6 +219,7 @@ def shortest_stay(
     limit: float = 0.0,
     block_limit: float | None = None,
     stop: Callable[[], bool] | None = None,
+    inner: tuple[sp.csr_matrix, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Per state one of the candidate rows (``matrix``: one distribution per candidate,
     over all states; ``row_states`` their states, sorted, at least one per state), chosen
@@ -231,11 +235,12 @@ def shortest_stay(
     where it never leaves, 0 off these states; where the block bound settled it, that
     bound, at most ``block_limit``, at every leaving state), or ``None`` when the last
     round changed the choice without evaluating it. ``stop``: asked before every round and
-    factorisation; once it says so, ``(choice, None)`` at once."""
+    factorisation; once it says so, ``(choice, None)`` at once. ``inner``:
+    :func:`inner_rows` of ``matrix`` and ``row_states``, if at hand."""
     rs = np.asarray(row_states, dtype=np.int64)
     seg = first_of_runs(rs)
     seg_id = run_ids(rs)
-    inner, states, leaving = _inner_rows(matrix, rs)
+    inner, states, leaving = inner_rows(matrix, rs) if inner is None else inner
     choice = np.asarray(start, dtype=np.int64)
 
     def evaluated(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,7 @@ from planner.imdp.kernels.upper import ROUNDING
 from planner.imdp.model import IMDP, first_of_runs, run_ids
 from planner.imdp.stay import (
     chain_stay_allowance,
+    inner_rows,
     shortest_stay,
     stay_limit,
     surest_exit_start,
@@ -116,7 +117,8 @@ def _short_stay_chain(
     cseg = first_of_runs(crs)
     if stop is not None and stop():
         return None
-    pick = surest_exit_start(matrix, crs)
+    inner = inner_rows(matrix, crs)  # for both searches below
+    pick = surest_exit_start(matrix, crs, inner=inner)
     if (pick < 0).any():
         # where no chain of the near rows leaves, rows that move towards the settled
         # states (a robust attractor; states at 0 count as settled)
@@ -130,7 +132,13 @@ def _short_stay_chain(
         # for, not bounded, so that the widening stays as small as they are
         closing = float(np.max(upper[st] - lower[st])) < tolerance
         pick, stay = shortest_stay(
-            matrix, crs, pick, limit=limit, block_limit=limit if closing else 0.0, stop=stop
+            matrix,
+            crs,
+            pick,
+            limit=limit,
+            block_limit=limit if closing else 0.0,
+            stop=stop,
+            inner=inner,
         )
     return near[pick], matrix[pick], stay
 

@@ -334,38 +334,46 @@ def _incoming_scatter(
 
 
 @numba.njit(cache=True, nogil=True)
-def _heap_push(key, item, size, k, x):
-    """Push ``(k, x)`` onto the max-heap ``key``/``item`` of ``size`` entries; the new size."""
-    i = size
-    key[i] = k
-    item[i] = x
-    while i > 0 and key[(i - 1) // 2] < key[i]:
+def _sift_up(key, heap, where, i):
+    """Move the state at heap position ``i`` of the max-heap ``heap`` (states, keyed by
+    ``key``; ``where``: each state's position) up to its place."""
+    s = heap[i]
+    k = key[s]
+    while i > 0:
         p = (i - 1) // 2
-        key[i], key[p] = key[p], key[i]
-        item[i], item[p] = item[p], item[i]
+        if key[heap[p]] >= k:
+            break
+        heap[i] = heap[p]
+        where[heap[i]] = i
         i = p
-    return size + 1
+    heap[i] = s
+    where[s] = i
 
 
 @numba.njit(cache=True, nogil=True)
-def _heap_pop(key, item, size):
-    """Remove the top of the max-heap; ``(key, item, new size)``."""
-    k, x = key[0], item[0]
+def _pop_top(key, heap, where, size):
+    """Remove the top state of the max-heap (see :func:`_sift_up`); ``(state, new size)``."""
+    top = heap[0]
+    where[top] = -1
     size -= 1
-    key[0], item[0] = key[size], item[size]
-    i = 0
-    while True:
-        a = 2 * i + 1
-        if a >= size:
-            break
-        if a + 1 < size and key[a + 1] > key[a]:
-            a += 1
-        if key[a] <= key[i]:
-            break
-        key[i], key[a] = key[a], key[i]
-        item[i], item[a] = item[a], item[i]
-        i = a
-    return k, x, size
+    if size > 0:
+        s = heap[size]
+        k = key[s]
+        i = 0
+        while True:
+            a = 2 * i + 1
+            if a >= size:
+                break
+            if a + 1 < size and key[heap[a + 1]] > key[heap[a]]:
+                a += 1
+            if key[heap[a]] <= k:
+                break
+            heap[i] = heap[a]
+            where[heap[i]] = i
+            i = a
+        heap[i] = s
+        where[s] = i
+    return top, size
 
 
 @numba.njit(cache=True, nogil=True)
@@ -380,14 +388,17 @@ def surest_exit_choice(row_state, leak, n_states, inc_ptr, inc_row, inc_p):
     search: next the state whose best row puts the most mass into the placed states plus
     its leak, with that row. Every chosen row has positive mass out or into states placed
     before it, so its chain leaves from every placed state; a state without a path out
-    gets ``-1``. Returns the chosen row of every state."""
+    gets ``-1``. Returns the chosen row of every state.
+
+    The unplaced states wait in a max-heap keyed by their best row's mass, raised in
+    place when it grows (at most ``n_states`` entries, one pop per placed state)."""
     n_rows = row_state.size
     acc = leak.copy()
     best = np.zeros(n_states)
     choice = np.full(n_states, -1, dtype=np.int64)
     placed = np.zeros(n_states, dtype=np.bool_)
-    key = np.empty(n_rows + inc_row.size)
-    item = np.empty(n_rows + inc_row.size, dtype=np.int64)
+    heap = np.empty(n_states, dtype=np.int64)
+    where = np.full(n_states, -1, dtype=np.int64)
     size = 0
     for r in range(n_rows):
         s = row_state[r]
@@ -396,14 +407,12 @@ def surest_exit_choice(row_state, leak, n_states, inc_ptr, inc_row, inc_p):
             choice[s] = r
     for s in range(n_states):
         if choice[s] >= 0:
-            size = _heap_push(key, item, size, best[s], choice[s])
+            heap[size] = s
+            _sift_up(best, heap, where, size)
+            size += 1
     while size > 0:
-        k, r, size = _heap_pop(key, item, size)
-        t = row_state[r]
-        if placed[t] or k < best[t]:
-            continue
+        t, size = _pop_top(best, heap, where, size)
         placed[t] = True
-        choice[t] = r
         for e in range(inc_ptr[t], inc_ptr[t + 1]):
             q = inc_row[e]
             s = row_state[q]
@@ -413,7 +422,12 @@ def surest_exit_choice(row_state, leak, n_states, inc_ptr, inc_row, inc_p):
             if acc[q] > best[s]:
                 best[s] = acc[q]
                 choice[s] = q
-                size = _heap_push(key, item, size, acc[q], q)
+                i = where[s]
+                if i < 0:
+                    i = size
+                    heap[size] = s
+                    size += 1
+                _sift_up(best, heap, where, i)
     for s in range(n_states):
         if not placed[s]:
             choice[s] = -1

@@ -146,3 +146,52 @@ def test_chain_orderings_keep_the_fill_of_a_fresh_ordering():
     fresh = chain_lu(sub)
     assert orderings.reused == 1
     assert reused.fill == fresh.L.nnz + fresh.U.nnz
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_chain_assembly_kernels_equal_their_array_definitions(seed):
+    from planner.imdp.kernels.chains import exit_matrix, split_chain
+
+    rng = np.random.default_rng(seed)
+    n_all, n = 40, 25
+    states = np.sort(rng.choice(n_all, size=n, replace=False))
+    pos = np.full(n_all, -1)
+    pos[states] = np.arange(n)
+    base = np.where(np.isin(np.arange(n_all), states), 0.0, rng.uniform(0, 1, n_all))
+    # rows in the adversary's order (unsorted columns), self-loops, dust and exact zeros
+    ptr, idx, val = [0], [], []
+    for i in range(n):
+        cols = rng.choice(n_all, size=int(rng.integers(1, 8)), replace=False)
+        if rng.random() < 0.5:
+            cols = np.append(cols[cols != states[i]], states[i])
+        p = rng.dirichlet(np.ones(cols.size))
+        p[rng.random(cols.size) < 0.2] = rng.choice([0.0, 1e-14, 3e-13])
+        idx += list(cols)
+        val += list(p)
+        ptr.append(len(idx))
+    ptr, idx, val = np.array(ptr), np.array(idx), np.array(val)
+    k_ptr, k_idx, k_val, i_ptr, i_idx, i_val, lost, kept, b = split_chain(
+        ptr, idx, val, states, pos, base, 1e-12
+    )
+    dense = sp.csr_matrix((val, idx, ptr), shape=(n, n_all)).toarray()
+    own = np.zeros_like(dense, dtype=bool)
+    own[np.arange(n), states] = True
+    dust = dense < 1e-12
+    clean = np.where(dust, 0.0, dense)
+    kept_m = sp.csr_matrix((k_val, k_idx, k_ptr), shape=(n, n_all))
+    assert np.array_equal(kept_m.toarray(), clean) and np.all(k_val >= 1e-12)
+    inner = sp.csr_matrix((i_val, i_idx, i_ptr), shape=(n, n))
+    assert np.array_equal(inner.toarray(), clean[:, states])
+    np.testing.assert_allclose(lost, np.where(dust & ~own, dense, 0.0).sum(axis=1), atol=1e-18)
+    np.testing.assert_allclose(kept, np.where(~dust & ~own, dense, 0.0).sum(axis=1), rtol=1e-14)
+    np.testing.assert_allclose(b, clean @ base, rtol=1e-14)
+    # A = diag(kept) - the inner rows off their diagonal, symmetrically permuted
+    perm = rng.permutation(n)
+    a_ptr, a_idx, a_val = exit_matrix(i_ptr, i_idx, i_val, kept, perm)
+    a = sp.csc_matrix((a_val, a_idx, a_ptr), shape=(n, n))
+    off = inner.toarray()
+    np.fill_diagonal(off, 0.0)
+    expected = (np.diag(kept) - off)[np.ix_(perm, perm)]
+    assert np.array_equal(a.toarray(), expected)
+    # the diagonal is stored even where nothing leaves its state
+    assert a.has_sorted_indices and a.nnz == np.count_nonzero(expected + np.eye(n))

@@ -113,6 +113,40 @@ def test_surest_exit_start_leaves_from_every_state_that_can_leave(seed):
     assert np.array_equal(leaves, can_leave)
 
 
+def _greedy_exits(matrix: sp.csr_matrix, rs: np.ndarray) -> np.ndarray:
+    """The greedy of ``surest_exit_choice`` by its definition, with no heap: each step
+    places the unplaced state whose best row has the most mass out or into the placed
+    states (-1 for the states never placed)."""
+    n = matrix.shape[1] - 1
+    dense = matrix.toarray()
+    placed = np.zeros(n + 1, dtype=bool)
+    placed[n] = True  # the exit
+    choice = np.full(n, -1)
+    while True:
+        mass = dense[:, placed].sum(axis=1)
+        mass[placed[rs]] = 0.0
+        if mass.max() <= 0.0:
+            return choice
+        r = int(np.argmax(mass))
+        choice[rs[r]] = r
+        placed[rs[r]] = True
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_surest_exit_start_is_the_greedy_of_most_mass_towards_the_exit(seed):
+    # rows scaled by continuous factors (the rest of their mass goes nowhere): no two rows
+    # tie, not even once all their successors are placed, so the greedy's order is unique
+    from planner.imdp.stay import surest_exit_start
+
+    rng = np.random.default_rng(100 + seed)
+    matrix, rs = _candidates(rng, 40, 5)
+    matrix = (sp.diags(rng.uniform(0.5, 1.0, rs.size)) @ matrix).tocsr()
+    choice = surest_exit_start(matrix, rs)
+    expected = _greedy_exits(matrix, rs)
+    assert (expected >= 0).sum() > 20
+    assert np.array_equal(choice, expected)
+
+
 def test_surest_exit_start_prefers_the_sure_step_to_a_creeping_one():
     # a corridor 0..9: per state a row that creeps (1e-9 on, the rest stays) and one that
     # jumps (0.5 on, 0.5 back); the last state's rows leave
