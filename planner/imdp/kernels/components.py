@@ -128,7 +128,9 @@ def maximal_end_components_kernel(
     are refined one at a time (a work list): drop the rows that leave the component and,
     in a cascade through the incoming entries, the states left without rows and the rows
     that then leave; if anything was dropped, split the rest into its SCCs and refine
-    those. Each round costs the size of the component it refines.
+    those. Each round costs the size of the component it refines. A part of a split from
+    which nothing is dropped is a maximal end component without a new decomposition: its
+    rows and states, hence its edges, are those it was strongly connected by.
 
     ``inc_ptr``/``inc_row``: the reverse index of the entries (the rows of the entries
     into each state, :meth:`planner.imdp.model.IMDP.incoming`). Each state's successors
@@ -167,6 +169,8 @@ def maximal_end_components_kernel(
     # the components to refine, as (label, list of states): states of a label are found
     # by scanning a per-label list built on the fly
     label_head = np.full(n + 1, -1, dtype=np.int64)
+    # labels given to the parts of a split: strongly connected when they were made
+    is_scc = np.zeros(n + 1, dtype=np.bool_)
     nxt = np.full(n, -1, dtype=np.int64)
     cnt = 0
     for s in range(n - 1, -1, -1):
@@ -229,6 +233,9 @@ def maximal_end_components_kernel(
                         alive[s] = False
                         queue[qt] = s
                         qt += 1
+        if is_scc[c] and not dropped:
+            # every row and state kept: the graph is the one c was strongly connected in
+            continue
         # the live members, and whether c is one SCC
         m = 0
         for i in range(k):
@@ -274,6 +281,10 @@ def maximal_end_components_kernel(
             grown = np.full(2 * next_label, -1, dtype=np.int64)
             grown[: label_head.size] = label_head
             label_head = grown
+            grown_scc = np.zeros(2 * next_label, dtype=np.bool_)
+            grown_scc[: is_scc.size] = is_scc
+            is_scc = grown_scc
+        is_scc[base:next_label] = True
         for i in range(m):
             s = members[i]
             lab = base + sub[i]
