@@ -38,6 +38,14 @@ class _Game:
         b = (self.bad & region).any(axis=1)
         return bool((g & ~b).any())
 
+    def may_win(self, region: np.ndarray, won: np.ndarray) -> bool:
+        """Whether :meth:`solve` of a sub-game on ``region`` can win anything: it holds a
+        ``won`` state or a state of some ``G_i`` outside ``B_i`` (else the game is lost
+        from every state of it, without looking at its rows)."""
+        if (won & region).any():
+            return True
+        return bool((self.good & ~self.bad & region).any())
+
     def max_rejecting(self, region: np.ndarray, won: np.ndarray) -> np.ndarray:
         """States of ``region`` whose colours lie in the largest rejecting colour subset
         (unique: Rabin-rejecting sets are closed under union)."""
@@ -128,14 +136,14 @@ class _Game:
                 u = region & ~self.max_rejecting(region, won)
                 a, choice = self.controller_attractor(region, rows_ok, entry_ok, u)
                 h = region & ~a
-                if h.any():
+                if self.may_win(h, won & h):
                     # the adversary can keep the run in h: restrict the entries to it
                     rows_h = rows_ok & h[m.row_state]
                     inside = h[m.successor] & rows_h[m.entry_row]
                     entry_h = inside if entry_ok is None else entry_ok & inside
                     w_h = self.solve(h, rows_h, entry_h, won & h, strategy)
                 else:
-                    w_h = h
+                    w_h = np.zeros_like(h)
                 if np.array_equal(w_h, h):
                     att = a & ~u & (choice >= 0)
                     strategy[att] = choice[att]
@@ -197,7 +205,8 @@ def almost_sure_region(
             np.ones(m.n_states, bool), rows_ok, None, np.zeros(m.n_states, bool), outside
         )
         region &= ~lose
-    rows_ok = game.closed_rows(region, rows_ok, None)
+        rows_ok = game.closed_rows(region, rows_ok, None)
+    # (with every state in the region, every row stays in it)
     strategy = np.full(m.n_states, -1, dtype=np.int64)
     win = game.solve(region, rows_ok, None, np.zeros(m.n_states, bool), strategy)
     strategy[~win] = -1
