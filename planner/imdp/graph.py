@@ -330,7 +330,7 @@ def end_component_labels(
     compiled: :func:`planner.imdp.kernels.maximal_end_components_kernel`)."""
     r = _all_rows(model, rows)
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
-    inc_ptr, inc_row, _, _ = model.incoming()
+    inc_ptr, inc_row, inc_state, inc_lower, inc_upper = model.reverse_index()
     return maximal_end_components_kernel(
         model.n_states,
         model.row_state,
@@ -340,6 +340,9 @@ def end_component_labels(
         model.upper,
         inc_ptr,
         inc_row,
+        inc_state,
+        inc_lower,
+        inc_upper,
         r,
         s,
         mode == Adversary.OPTIMISTIC,

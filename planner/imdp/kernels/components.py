@@ -115,6 +115,9 @@ def maximal_end_components_kernel(
     upper,
     inc_ptr,
     inc_row,
+    inc_state,
+    inc_lower,
+    inc_upper,
     rows_ok,
     states_ok,
     optimistic,
@@ -132,8 +135,13 @@ def maximal_end_components_kernel(
     which nothing is dropped is a maximal end component without a new decomposition: its
     rows and states, hence its edges, are those it was strongly connected by.
 
-    ``inc_ptr``/``inc_row``: the reverse index of the entries (the rows of the entries
-    into each state, :meth:`planner.imdp.model.IMDP.incoming`). Each state's successors
+    ``inc_ptr``/``inc_row``/``inc_state``/``inc_lower``/``inc_upper``: the reverse index
+    of the entries (the rows, their states and the bounds of the entries into each state,
+    :meth:`planner.imdp.model.IMDP.reverse_index`; read in order, the states first). In
+    the cascade a dropped state drops a row
+    through an entry at once where that entry alone decides (``upper > 0``, or in the
+    optimistic case ``lower > 0``); an entry with ``upper == 0`` changes nothing, and only
+    an optimistic row that loses ``upper`` mass is checked again. Each state's successors
     enter its SCC graph once (repeated successors of its rows are skipped).
 
     Returns ``(comp, rows)``: component label per state (-1: in none; labels are not
@@ -220,13 +228,19 @@ def maximal_end_components_kernel(
             qh += 1
             dropped = True
             for j in range(inc_ptr[t], inc_ptr[t + 1]):
+                if inc_upper[j] <= 0.0:
+                    continue
+                s = inc_state[j]
+                if not alive[s] or comp[s] != c:
+                    continue
                 r = inc_row[j]
                 if not rows[r]:
                     continue
-                s = row_state[r]
-                if not alive[s] or comp[s] != c:
-                    continue
-                if not _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, optimistic):
+                if (
+                    not optimistic
+                    or inc_lower[j] > 0.0
+                    or not _row_stays(r, c, comp, alive, row_ptr, successor, lower, upper, True)
+                ):
                     rows[r] = False
                     n_live[s] -= 1
                     if n_live[s] == 0:
