@@ -436,12 +436,29 @@ def strategy_reach_value(
         ``(n_states,)`` values, or ``None`` when the adversary did not settle within
         ``max_rounds`` (no bound is then claimed).
     """
+    out = strategy_reach_values(
+        model, rows, fixed_val, adversary_minimizes, start, max_rounds, sound
+    )
+    return None if out is None else out[0]
+
+
+def strategy_reach_values(
+    model: IMDP,
+    rows: np.ndarray,
+    fixed_val: np.ndarray,
+    adversary_minimizes: bool,
+    start: np.ndarray,
+    max_rounds: int = 50,
+    sound: bool = True,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`strategy_reach_value` and the computed values it lowered: ``(values,
+    computed)`` (the same array twice without ``sound``), or ``None``."""
     out = _settled_chain(model, rows, fixed_val, adversary_minimizes, start, max_rounds)
     if out is None:
         return None
     x, err, defect, used = out
     if err is None or not sound:
-        return x.copy()
+        return x.copy(), x
     # rounded down: the subtraction itself must not round above the bound
     low = np.maximum(np.nextafter(x - err.bound(defect), -np.inf), 0.0)
     worst = float(np.max(x - low))
@@ -449,4 +466,4 @@ def strategy_reach_value(
         shown = shown_below(model, used, x, err, adversary_minimizes, worst)
         if shown is not None:
             low = np.maximum(low, shown)
-    return low
+    return low, x

