@@ -414,7 +414,7 @@ def strategy_reach_value(
     start: np.ndarray,
     max_rounds: int = 50,
     sound: bool = True,
-) -> np.ndarray | None:
+) -> tuple[np.ndarray, np.ndarray] | None:
     """``V_sigma`` of the strategy that plays ``rows`` (one row per free state, sorted),
     lowered state by state by the error bound of its computation (``A^-1`` applied to the
     solve's residual plus the order slack's defect; see :class:`ChainError`) so that it
@@ -433,26 +433,11 @@ def strategy_reach_value(
             checked), not a bound.
 
     Returns:
-        ``(n_states,)`` values, or ``None`` when the adversary did not settle within
+        ``(values, computed)``: the ``(n_states,)`` values and the computed values they
+        lowered (equal without ``sound``; strategy iteration decides by the computed
+        ones), or ``None`` when the adversary did not settle within
         ``max_rounds`` (no bound is then claimed).
     """
-    out = strategy_reach_values(
-        model, rows, fixed_val, adversary_minimizes, start, max_rounds, sound
-    )
-    return None if out is None else out[0]
-
-
-def strategy_reach_values(
-    model: IMDP,
-    rows: np.ndarray,
-    fixed_val: np.ndarray,
-    adversary_minimizes: bool,
-    start: np.ndarray,
-    max_rounds: int = 50,
-    sound: bool = True,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """:func:`strategy_reach_value` and the computed values it lowered: ``(values,
-    computed)`` (the same array twice without ``sound``), or ``None``."""
     out = _settled_chain(model, rows, fixed_val, adversary_minimizes, start, max_rounds)
     if out is None:
         return None

@@ -10,7 +10,7 @@ from scipy.sparse.csgraph import connected_components
 
 from planner.errors import SpecificationError
 from planner.imdp import graph
-from planner.imdp.evaluate import strategy_reach_values
+from planner.imdp.evaluate import strategy_reach_value
 from planner.imdp.kernels.rows import greedy_rows
 from planner.imdp.model import IMDP, first_of_runs, row_entries, run_ids
 from planner.imdp.ordering import OrderingAdversary
@@ -88,7 +88,7 @@ def strategy_iteration(
     limit = MAX_IMPROVEMENTS if max_rounds is None else max_rounds
     for rounds in range(1, limit + 1):
         start = v if best is None else best
-        out = strategy_reach_values(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
+        out = strategy_reach_value(m, sigma, fixed_val, adversary_minimizes, start, sound=sound)
         if out is None:
             return best, None, rounds
         x, computed = out

@@ -333,21 +333,23 @@ def _incoming_scatter(
         up[k] = upper[e]
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put(heap, where, i, s):
+    """State ``s`` at position ``i`` of the heap (and its position recorded)."""
+    heap[i] = s
+    where[s] = i
+
+
 @numba.njit(cache=True, nogil=True)
 def _sift_up(key, heap, where, i):
     """Move the state at heap position ``i`` of the max-heap ``heap`` (states, keyed by
-    ``key``; ``where``: each state's position) up to its place."""
+    ``key``; ``where``: each state's position, -1 outside) up to its place."""
     s = heap[i]
     k = key[s]
-    while i > 0:
-        p = (i - 1) // 2
-        if key[heap[p]] >= k:
-            break
-        heap[i] = heap[p]
-        where[heap[i]] = i
-        i = p
-    heap[i] = s
-    where[s] = i
+    while i > 0 and key[heap[(i - 1) // 2]] < k:
+        _put(heap, where, i, heap[(i - 1) // 2])
+        i = (i - 1) // 2
+    _put(heap, where, i, s)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -356,23 +358,20 @@ def _pop_top(key, heap, where, size):
     top = heap[0]
     where[top] = -1
     size -= 1
-    if size > 0:
-        s = heap[size]
-        k = key[s]
-        i = 0
-        while True:
-            a = 2 * i + 1
-            if a >= size:
-                break
-            if a + 1 < size and key[heap[a + 1]] > key[heap[a]]:
-                a += 1
-            if key[heap[a]] <= k:
-                break
-            heap[i] = heap[a]
-            where[heap[i]] = i
-            i = a
-        heap[i] = s
-        where[s] = i
+    if size == 0:
+        return top, size
+    s = heap[size]
+    k = key[s]
+    i = 0
+    while 2 * i + 1 < size:
+        a = 2 * i + 1
+        if a + 1 < size and key[heap[a + 1]] > key[heap[a]]:
+            a += 1
+        if key[heap[a]] <= k:
+            break
+        _put(heap, where, i, heap[a])
+        i = a
+    _put(heap, where, i, s)
     return top, size
 
 

@@ -200,9 +200,9 @@ def test_the_chain_assembly_kernels_equal_their_array_definitions(seed):
 def test_strategy_values_are_the_lowered_bound_and_the_computed_values_it_lowers():
     # one row per state, every lower bound positive: mass circulates long, the bounds of
     # the computed values are positive
-    from planner.imdp.evaluate import strategy_reach_value, strategy_reach_values
+    from planner.imdp.evaluate import strategy_reach_value
 
-    from .reference import sticky_imdp
+    from .reference import exact_reach_by_strategies, sticky_imdp
 
     rng = np.random.default_rng(4)
     for _ in range(10):
@@ -211,8 +211,10 @@ def test_strategy_values_are_the_lowered_bound_and_the_computed_values_it_lowers
         fixed = goal.astype(float)
         rows = np.flatnonzero(~goal[m.row_state])
         start = np.zeros(m.n_states)
-        low, computed = strategy_reach_values(m, rows, fixed, True, start)
-        assert np.array_equal(low, strategy_reach_value(m, rows, fixed, True, start))
-        raw = strategy_reach_value(m, rows, fixed, True, start, sound=False)
-        assert np.array_equal(computed, raw)
+        low, computed = strategy_reach_value(m, rows, fixed, True, start)
+        raw, same = strategy_reach_value(m, rows, fixed, True, start, sound=False)
+        assert np.array_equal(computed, raw) and np.array_equal(raw, same)
         assert np.all(low <= computed) and np.any(low < computed)
+        # one row per state: the strategy's value is the value, which the bound is below
+        exact = exact_reach_by_strategies(m, goal)
+        assert np.all(low <= exact + 1e-15)
