@@ -330,23 +330,11 @@ def end_component_labels(
     compiled: :func:`planner.imdp.kernels.maximal_end_components_kernel`)."""
     r = _all_rows(model, rows)
     s = np.ones(model.n_states, dtype=bool) if states is None else np.asarray(states, bool)
-    inc_ptr, inc_row, inc_state, inc_lower, inc_upper = model.reverse_index()
-    return maximal_end_components_kernel(
-        model.n_states,
-        model.row_state,
-        model.row_ptr,
-        model.successor,
-        model.lower,
-        model.upper,
-        inc_ptr,
-        inc_row,
-        inc_state,
-        inc_lower,
-        inc_upper,
-        r,
-        s,
-        mode == Adversary.OPTIMISTIC,
-    )
+    m = model
+    arrays = (m.n_states, m.row_state, m.row_ptr, m.successor, m.lower, m.upper)
+    # the reverse index: (ptr, rows, states, lower, upper), the kernel's next arguments
+    optimistic = mode == Adversary.OPTIMISTIC
+    return maximal_end_components_kernel(*arrays, *m.reverse_index(), r, s, optimistic)
 
 
 def components_from_labels(model: IMDP, comp: np.ndarray, kept: np.ndarray) -> list[EndComponent]:
