@@ -70,7 +70,7 @@ from planner.imdp.interval import (
 )
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.kernels.sweeps import sweep_layout
-from planner.imdp.model import IMDP
+from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.problem import ValueIteration
 from planner.imdp.strategy import SI_MAX_STATES
 from planner.imdp.widening import certified_upper
@@ -111,6 +111,10 @@ strategy iteration on all 9,905 free states that made the values exact and the p
 from above that followed took 2-20 s and closed none. On fewer free states that strategy
 iteration is cheap and the full sweeps still run (they close many small models whose
 interval iteration gave up)."""
+
+_ROW_ROUNDING = 1e-12
+"""What a row's computed value may exceed its exact value by, taken generously (its
+rounding is a few ``eps``)."""
 
 _FIRST_EVALUATION = 16
 """Sweeps before the first check for slow convergence (then after 32, 64, ... sweeps)."""
@@ -203,6 +207,7 @@ class _ReachSweeps:
         self.history: list[tuple[int, float]] = []
         self.goal = alg.tolerance
         self.exacted = False
+        self._q: tuple[np.ndarray, np.ndarray] | None = None  # (v, row values at v)
         self.certificate: tuple[np.ndarray, bool, np.ndarray] | None = None
         """``(bound, shown, certified bound)`` where :meth:`finish_stalled` certified a
         bound from above already."""
@@ -215,9 +220,29 @@ class _ReachSweeps:
             self.it,
             self.sigma,
             self.evaluations,
-            self.sweeper.row_values(self.v, strategy.optimal_slack(self.alg.tolerance)),
+            self.row_values(),
             self.upper_sweeps,
         )
+
+    def row_values(self) -> np.ndarray:
+        """The robust value of every free row under ``v`` (exact within the optimal slack
+        of the best, :meth:`ReachSweeper.row_values`), kept while ``v`` stays."""
+        if self._q is None or not np.array_equal(self._q[0], self.v):
+            q = self.sweeper.row_values(self.v, strategy.optimal_slack(self.alg.tolerance))
+            self._q = (self.v.copy(), q)
+        return self._q[1]
+
+    def candidate_below_value(self) -> bool:
+        """Whether the candidate ``min(1, L + tolerance / 2)`` lies below the value at some
+        state, so that no checking pass can show it superharmonic: ``L <= V*`` and ``T``
+        is monotone, so ``T(L) <= T(V*) = V*``, and where ``T(L)`` exceeds the candidate
+        (by more than the rounding of a row's value) so does ``V*``."""
+        rs = self.m.row_state[self.free_rows]
+        seg = first_of_runs(rs)
+        best = np.maximum.reduceat(self.row_values(), seg)
+        st = rs[seg]
+        cand = np.minimum(1.0, self.v[st] + self.alg.tolerance / 2)
+        return bool(np.any(best > cand + _ROW_ROUNDING))
 
     def interval_iteration(self) -> bool:
         """Interval iteration first (certified maximal reachability against a minimising
@@ -335,7 +360,8 @@ class _ReachSweeps:
 
         def below() -> None:
             self._settle()
-            self.keep_upper(self.candidate())
+            if not self.candidate_below_value():
+                self.keep_upper(self.candidate())
 
         self.certificate, _ = concurrently(certificate, below, "upper")
 

@@ -327,3 +327,33 @@ def test_a_stalled_window_without_progress_ends_interval_iteration(monkeypatch, 
     else:
         # the window with progress counts a stall; the flat one after it ends the iteration
         assert ii.it == 4 * window and ii.stalls == 1
+
+
+def test_a_candidate_flagged_below_the_value_is_below_it_and_fails_its_check():
+    # after a few sweeps from 0 the lower bound L is sound; where some T(L)(s) exceeds
+    # min(1, L(s) + tolerance / 2), so does V*(s), and the checking passes cannot pass
+    from planner.imdp.reachability import _ReachSweeps
+
+    rng = np.random.default_rng(5)
+    flagged = unflagged = 0
+    for _ in range(40):
+        m = random_imdp(rng, n_states=15, zero_lower=False)
+        tgt = m.states_labelled("goal")
+        if not tgt.any():
+            continue
+        ref = ref_reach(m, tgt, np.zeros(m.n_states, bool), pessimistic=True, maximize=True)
+        fixed = tgt.astype(float)
+        free_rows = np.flatnonzero(~tgt[m.row_state])
+        tol = float(10 ** rng.uniform(-6, -2))
+        run = _ReachSweeps(m, free_rows, fixed, True, True, ValueIteration(tol))
+        for _ in range(int(rng.integers(1, 40))):
+            run.sweeper.sweep(run.v, True)
+        assert np.all(run.v <= ref + 1e-12)
+        cand = np.minimum(1.0, run.v + tol / 2)
+        if run.candidate_below_value():
+            flagged += 1
+            assert np.any(ref > cand)
+            assert run.candidate() is None
+        else:
+            unflagged += 1
+    assert flagged > 5 and unflagged > 5
