@@ -334,15 +334,6 @@ def chain_reach(
     return (out, err) if error else out
 
 
-def _row_sums(indptr: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Per CSR row, the sum of ``values`` (0 for an empty row)."""
-    out = np.zeros(indptr.size - 1)
-    full = np.diff(indptr) > 0
-    if values.size:
-        out[full] = np.add.reduceat(values, indptr[:-1][full])
-    return out
-
-
 def row_rounding(
     indptr: np.ndarray, indices: np.ndarray, values: np.ndarray, per_entry: float = 1.0
 ) -> np.ndarray:

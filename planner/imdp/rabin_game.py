@@ -198,7 +198,8 @@ def almost_sure_region(
     game = _Game(m, good, bad)
     rows_ok = np.ones(m.n_rows, dtype=bool) if rows is None else np.asarray(rows, bool).copy()
     region = graph.has_row(m, rows_ok)
-    # states without an allowed row take no part (a run there is stopped: losing)
+    # states without an allowed row take no part (a run there is stopped: losing); only
+    # then can a row leave the region and need dropping
     outside = ~region
     if outside.any():
         lose = game.adversary_attractor(
@@ -206,7 +207,6 @@ def almost_sure_region(
         )
         region &= ~lose
         rows_ok = game.closed_rows(region, rows_ok, None)
-    # (with every state in the region, every row stays in it)
     strategy = np.full(m.n_states, -1, dtype=np.int64)
     win = game.solve(region, rows_ok, None, np.zeros(m.n_states, bool), strategy)
     strategy[~win] = -1

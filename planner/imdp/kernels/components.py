@@ -138,11 +138,11 @@ def maximal_end_components_kernel(
     ``inc_ptr``/``inc_row``/``inc_state``/``inc_lower``/``inc_upper``: the reverse index
     of the entries (the rows, their states and the bounds of the entries into each state,
     :meth:`planner.imdp.model.IMDP.reverse_index`; read in order, the states first). In
-    the cascade a dropped state drops a row
-    through an entry at once where that entry alone decides (``upper > 0``, or in the
-    optimistic case ``lower > 0``); an entry with ``upper == 0`` changes nothing, and only
-    an optimistic row that loses ``upper`` mass is checked again. Each state's successors
-    enter its SCC graph once (repeated successors of its rows are skipped).
+    the cascade a dropped state drops a row through an entry at once where that entry
+    alone decides (``upper > 0``, or in the optimistic case ``lower > 0``); an entry with
+    ``upper == 0`` changes nothing, and only an optimistic row that loses ``upper`` mass
+    is checked again. Each state's successors enter its SCC graph once (repeated
+    successors of its rows are skipped).
 
     Returns ``(comp, rows)``: component label per state (-1: in none; labels are not
     consecutive) and the rows kept.
