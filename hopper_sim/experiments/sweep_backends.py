@@ -9,8 +9,11 @@ every backend, so that float reductions, and hence the runs, do not depend on th
 from __future__ import annotations
 
 import os
+import signal
+import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -91,12 +94,14 @@ def _init_worker(parent: int | None = None) -> None:
     # Workers share the cores: one compute thread each (torch reads these when imported).
     for var in _THREAD_VARS:
         os.environ[var] = "1"
-    import signal
     import sys
 
     if parent is not None:
         die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    if hasattr(signal, "pthread_sigmask"):
+        # blocked since the spawn (_signals_held); a Ctrl-C pending since is dropped
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
     torch = sys.modules.get("torch")
@@ -128,19 +133,13 @@ def _iter_process(
     run: RunFunction, scenario: Scenario, tasks: Sequence[SweepTask], workers: int
 ) -> Iterator[tuple[SweepTask, SweepRow]]:
     import multiprocessing
-    import signal
-    import threading
 
     ctx = multiprocessing.get_context("spawn")
     pool: ProcessPoolExecutor | None = None
     pending: dict = {}
-    # The workers (and multiprocessing's resource tracker) are started with SIGINT ignored,
-    # which they keep from their first instruction: a Ctrl-C reaches the whole process
-    # group, and is the parent's alone to handle (no worker prints a traceback).
     main = threading.current_thread() is threading.main_thread()
     try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-        try:
+        with _signals_held() if main else nullcontext():
             pool = ProcessPoolExecutor(
                 max_workers=workers,
                 mp_context=ctx,
@@ -148,9 +147,6 @@ def _iter_process(
                 initargs=(os.getpid(),),
             )
             pending = {pool.submit(_run_task, run, scenario, t): t for t in tasks}
-        finally:
-            if main:
-                signal.signal(signal.SIGINT, previous)
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
@@ -168,6 +164,43 @@ def _iter_process(
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Ctrl-C (SIGINT) and SIGTERM held while the workers start, then delivered (main
+    thread only).
+
+    SIGINT is blocked in this thread, so the workers spawned from it start with it blocked
+    from their first instruction. A Ctrl-C reaches the whole process group, and it is the
+    parent's alone to handle: no worker prints a traceback. Each worker ignores it once it
+    is up (``_init_worker``). multiprocessing's resource tracker is started first: when the
+    first spawn starts it, it unblocks SIGINT in this thread after its own spawn, and the
+    workers would then start without the block.
+
+    Meanwhile both signals are recorded rather than raised. A KeyboardInterrupt inside the
+    executor's start-up could leave its state half made. A signal that came is raised again
+    once the previous handlers are back. Before, SIGINT was ignored here; a Ctrl-C in this
+    window was then lost, and the sweep went on to its end."""
+    held: list[int] = []
+    kinds = (signal.SIGINT, signal.SIGTERM)
+    previous = [signal.signal(k, lambda signum, _frame: held.append(signum)) for k in kinds]
+    blocks = hasattr(signal, "pthread_sigmask")
+    if blocks:
+        from multiprocessing import resource_tracker
+
+        resource_tracker.ensure_running()
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if blocks:  # a pending Ctrl-C is recorded here
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        for k, handler in zip(kinds, previous, strict=True):
+            if handler is not None:
+                signal.signal(k, handler)
+    for signum in dict.fromkeys(held):
+        signal.raise_signal(signum)
 
 
 def _import_ray() -> Any:

@@ -12,8 +12,12 @@ import dataclasses
 import io
 import json
 import math
+import multiprocessing
 import os
+import signal
+import subprocess
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +26,7 @@ from scipy import stats
 
 from hopper_sim.cli import main as hopnav
 from hopper_sim.experiments import sweep as sw
+from hopper_sim.experiments import sweep_backends
 from hopper_sim.experiments import sweep_files as sf
 from hopper_sim.experiments.sweep import (
     PAPER_TABLE_I,
@@ -239,6 +244,62 @@ def test_process_backend_reraises_a_failing_run(scenario):
             backend="process",
             workers=1,
         )
+
+
+class _InterruptedAtStart(ProcessPoolExecutor):
+    """The process backend's executor, with a Ctrl-C sent to this process as the first run
+    is submitted, while the workers start."""
+
+    def submit(self, *args, **kwargs):
+        if not getattr(self, "sent", False):
+            self.sent = True
+            os.kill(os.getpid(), signal.SIGINT)
+        return super().submit(*args, **kwargs)
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="POSIX signal masks")
+def test_process_backend_keeps_a_ctrl_c_that_comes_while_the_workers_start(scenario, monkeypatch):
+    """A Ctrl-C while the pool starts is delivered once it has started, not lost. Before the
+    fix it was ignored there, and the sweep ran to its end."""
+    monkeypatch.setattr(sweep_backends, "ProcessPoolExecutor", _InterruptedAtStart)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_sweep(scenario, SMALL, run=fake_run, backend="process", workers=2)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert multiprocessing.active_children() == []  # the workers were ended and joined
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="POSIX signal masks")
+def test_workers_start_with_ctrl_c_blocked_in_a_fresh_process():
+    """Workers spawned while the signals are held inherit SIGINT blocked, also in a process
+    whose resource tracker is not running yet. When the first spawn starts the tracker, it
+    unblocks SIGINT after its own spawn. The parent's mask is restored after."""
+    code = (
+        "import multiprocessing, signal\n"
+        "from concurrent.futures import ProcessPoolExecutor\n"
+        "from hopper_sim.experiments.sweep_backends import _signals_held\n"
+        "with _signals_held():\n"
+        "    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context('spawn'))\n"
+        "    futs = [pool.submit(signal.pthread_sigmask, signal.SIG_BLOCK, set())"
+        " for _ in range(2)]\n"
+        "masks = [f.result() for f in futs]\n"
+        "pool.shutdown()\n"
+        "print(all(signal.SIGINT in m for m in masks),"
+        " signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, set()))\n"
+    )
+    root = Path(__file__).resolve().parents[3]
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])),
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["True", "False"]
 
 
 def test_bad_backend_and_workers(scenario):
