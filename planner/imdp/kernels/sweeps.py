@@ -26,10 +26,11 @@ from planner.imdp.kernels.rows import (
     all_row_values,
     empty_slots,
     fill_layout,
+    gather_rows,
     regather_rows,
     row_distributions,
 )
-from planner.imdp.kernels.upper import flag_predecessors, upper_sweep
+from planner.imdp.kernels.upper import flag_predecessors, top_of_cache, upper_sweep
 from planner.imdp.model import IMDP
 
 ELIMINATE = True
@@ -55,6 +56,14 @@ model nearly every state moves in each of its 27 passes, and tracking from the s
 the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
+_NO_TOP = (np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.bool_))
+
+TOP_ROWS_EVALUATIONS = 1.05
+TOP_ROWS_STALE = 0.05
+"""An untracked lazy pass from above that evaluated at most ``TOP_ROWS_EVALUATIONS`` rows
+per state copies each state's top row, and later passes with the same row cache read
+those rows from the copy (:func:`planner.imdp.kernels.upper.upper_sweep`); the copy is
+made again after a pass that left more than ``TOP_ROWS_STALE`` of its states stale."""
 _NO_INDEX = np.empty(0, dtype=np.int64)
 _NO_FLAGS = np.empty(0, dtype=np.bool_)
 
@@ -118,6 +127,8 @@ class ReachSweeper:
         self.adversary_minimizes = bool(adversary_minimizes)
         self._light: tuple[np.ndarray, ...] | None = None
         self._light_rows = _NO_INDEX  # the best row in each slot of the copy
+        # the lazy passes' top rows: (cache they were read from, top, other, stale, copy)
+        self._top: tuple | None = None
         self.before_sweep: Callable[[], None] | None = None
         """Called before each sweep from below (to abandon the sweeps, it raises)."""
         self._no_cache = np.empty(0)
@@ -276,7 +287,16 @@ class ReachSweeper:
             # untracked; a tracked call still counts the states moved by more than its bound
             above = self._tracking[4] if track else 0.0
             tracking = (_NOT_TRACKED, _NO_INDEX, _NO_INDEX, _NO_INDEX, above)
-        dec, bad, moved = upper_sweep(
+        use_top = (
+            lazy
+            and not raise_violations
+            and tracking[0].size == 0
+            and self._top is not None
+            and self._top[0] is cache
+        )
+        top = self._top[1:4] if use_top else _NO_TOP
+        rows = self._top[4] if use_top else NO_LAYOUT
+        dec, bad, moved, evaluated = upper_sweep(
             self.states,
             self.state_rows,
             self.row_ptr,
@@ -292,10 +312,29 @@ class ReachSweeper:
             cache if lazy else self._no_cache,
             lazy,
             *tracking,
+            *top,
+            rows,
         )
         if track:
             self._moved = int(moved)
+        if lazy and tracking[0].size == 0:
+            self._keep_top_rows(cache, int(evaluated), use_top)
         return float(dec), int(bad)
+
+    def _keep_top_rows(self, cache: np.ndarray, evaluated: int, used: bool) -> None:
+        """After an untracked lazy pass that evaluated at most ``TOP_ROWS_EVALUATIONS``
+        rows per state: copy each state's top row for the next passes with this ``cache``
+        (:func:`upper_sweep`), unless a copy in use has at most ``TOP_ROWS_STALE`` of its
+        states stale."""
+        n = self.states.size
+        if evaluated > TOP_ROWS_EVALUATIONS * n:
+            return
+        if used and np.count_nonzero(self._top[3]) <= TOP_ROWS_STALE * n:
+            return
+        top, other = top_of_cache(self.state_rows, cache)
+        layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit_up)
+        rows = gather_rows(top, *layout)
+        self._top = (cache, top, other, np.zeros(n, dtype=np.bool_), rows)
 
     def frozen(self) -> ReachSweeper:
         """A view for another thread, for :meth:`adversary_matrix` and :meth:`row_values`

@@ -49,6 +49,10 @@ def upper_sweep(
     inc_row,
     row_state,
     mark_above,
+    top,
+    other,
+    stale,
+    top_rows,
 ):
     """One Gauss-Seidel pass of ``U(s) <- T(U)(s)`` from above, in place, that only ever
     lowers ``U``: a state whose Bellman value exceeds ``U(s)`` keeps ``U(s)`` and counts as
@@ -78,8 +82,22 @@ def upper_sweep(
     a successor: ``inc_ptr``/``inc_row`` of the model's reverse index, ``row_state``). A
     skipped update is one left out, which keeps ``U`` an upper bound; with
     ``mark_above = 0`` it is one whose inputs did not change since the state's last
-    evaluation. Returns ``(max decrease, violations, moved)``, ``moved`` the number of
-    states whose value fell by more than ``mark_above``.
+    evaluation. Returns ``(max decrease, violations, moved, evaluations)``, ``moved`` the
+    number of states whose value fell by more than ``mark_above``, ``evaluations`` the rows
+    evaluated (lazy).
+
+    Top rows (``top`` non-empty; lazy only): ``top[k]`` is the layout row of the highest
+    cached value of the ``k``-th state when the copy was made, ``other[k]`` the highest
+    cached value of its other rows then, and ``top_rows = (ptr, remaining, succ, lower,
+    gap, crit)`` a contiguous copy of those rows
+    (:func:`planner.imdp.kernels.rows.gather_rows`; its ``crit`` is written here from
+    ``crit``). A state not flagged in ``stale`` evaluates its top row from the copy, where
+    the rows lie in pass order (in the layout they lie scattered, which makes them slow
+    to read). Where that value exceeds ``other[k]`` it is the state's maximum: cached
+    values only fall, so ``other[k]`` still bounds every other row. Otherwise the state is
+    flagged stale and evaluated as without the copy. The value is
+    :func:`threshold_value`'s on the same entries in the same order, so the pass gives the
+    values it gives without the copy.
     """
     sign = 1.0 if adversary_minimizes else -1.0
     idx, keys = scratch(row_ptr)
@@ -93,6 +111,9 @@ def upper_sweep(
             width = max(width, state_rows[k + 1] - state_rows[k])
     fresh = np.zeros(width, dtype=np.bool_)
     track = due.size > 0
+    use_top = lazy and top.size > 0
+    t_ptr, t_rem, t_succ, t_lower, t_gap, t_crit = top_rows
+    evaluations = 0
     for k in range(states.size):
         s = states[k]
         if track:
@@ -102,27 +123,40 @@ def upper_sweep(
         lo = state_rows[k]
         hi = state_rows[k + 1]
         best = -np.inf if maximize else np.inf
-        if lazy:
+        done = False
+        if use_top and not stale[k]:
+            r = top[k]
+            t_crit[k] = t_ptr[k] + crit[r] - row_ptr[r]
+            q = threshold_value(k, t_ptr, t_rem, t_succ, t_lower, t_gap, u, sign, t_crit)
+            evaluations += 1
+            if q > other[k]:  # never for nan: that row is sorted below
+                cache[r] = q
+                best = q
+                done = True
+            else:
+                stale[k] = True
+        if lazy and not done:
             fresh[: hi - lo] = False
             while True:
-                top = lo
+                first = lo
                 for r in range(lo + 1, hi):
                     # ties go to a fresh row: the maximum is then known
-                    if cache[r] > cache[top] or (
-                        cache[r] == cache[top] and fresh[r - lo] and not fresh[top - lo]
+                    if cache[r] > cache[first] or (
+                        cache[r] == cache[first] and fresh[r - lo] and not fresh[first - lo]
                     ):
-                        top = r
-                if fresh[top - lo]:
-                    best = cache[top]
+                        first = r
+                if fresh[first - lo]:
+                    best = cache[first]
                     break
-                q = threshold_value(top, row_ptr, remaining, succ, lower, gap, u, sign, crit)
+                q = threshold_value(first, row_ptr, remaining, succ, lower, gap, u, sign, crit)
                 if q != q:
                     q = sorted_value(
-                        top, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
+                        first, row_ptr, remaining, succ, lower, gap, u, sign, crit, idx, keys
                     )
-                cache[top] = q
-                fresh[top - lo] = True
-        else:
+                cache[first] = q
+                fresh[first - lo] = True
+                evaluations += 1
+        elif not lazy:
             for r in range(lo, hi):
                 q = threshold_value(r, row_ptr, remaining, succ, lower, gap, u, sign, crit)
                 if q != q:
@@ -144,4 +178,25 @@ def upper_sweep(
             violations += 1
             if raise_violations:
                 u[s] = best
-    return decrease, violations, moved
+    return decrease, violations, moved, evaluations
+
+
+@numba.njit(cache=True, nogil=True)
+def top_of_cache(state_rows, cache):
+    """Per state of a layout (rows ``state_rows[k]:state_rows[k + 1]``): the row of its
+    highest cached value (the first of equal ones) and the highest value of its other rows
+    (``-inf`` for a state with one row)."""
+    n = state_rows.size - 1
+    top = np.empty(n, dtype=np.int64)
+    other = np.full(n, -np.inf)
+    for k in range(n):
+        lo, hi = state_rows[k], state_rows[k + 1]
+        first = lo
+        for r in range(lo + 1, hi):
+            if cache[r] > cache[first]:
+                first = r
+        top[k] = first
+        for r in range(lo, hi):
+            if r != first and cache[r] > other[k]:
+                other[k] = cache[r]
+    return top, other

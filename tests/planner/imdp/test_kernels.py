@@ -63,6 +63,77 @@ def test_lazy_upper_pass_equals_the_full_pass_while_values_decrease(seed):
 
 
 @pytest.mark.parametrize("minimize", [True, False])
+@pytest.mark.parametrize("seed", range(3))
+def test_top_row_passes_give_the_lazy_passes_values_bit_for_bit(seed, minimize, monkeypatch):
+    # the same lazy passes with and without the top rows' copy; the copy made after every
+    # pass, and again once a tenth of it is stale, so that both of its paths run
+    monkeypatch.setattr(sweeps, "TOP_ROWS_EVALUATIONS", 1e9)
+    monkeypatch.setattr(sweeps, "TOP_ROWS_STALE", 0.1)
+    rng = np.random.default_rng(seed)
+    m = random_imdp(rng, n_states=80, n_actions=5, max_succ=6)
+    plain, top = _sweeper(m, minimize), _sweeper(m, minimize)
+    cache_a, cache_b = plain.upper_cache(), top.upper_cache()
+    u = np.ones(m.n_states)
+    used = stale = 0
+    for step in range(16):
+        a, b = u.copy(), u.copy()
+        copy = top._top
+        dec_a, bad_a = plain.upper_pass(a, cache=cache_a)
+        dec_b, bad_b = top.upper_pass(b, cache=cache_b)
+        np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(cache_b, cache_a)
+        assert (dec_a, bad_a) == (dec_b, bad_b)
+        if copy is not None:
+            used += 1
+            stale += int(copy[3].sum())
+        # small falls keep the top rows; a fall that keeps the order of the values (the
+        # adversary's critical entries stand) changes which row is highest at some states,
+        # a fall at half of the states moves the critical entries too
+        if step % 3 == 1:
+            u = a**2
+        elif step % 3 == 2:
+            u = a * np.where(rng.random(m.n_states) < 0.5, 0.3, 1.0)
+        else:
+            u = a * 0.999
+    assert used >= 14 and 0 < stale
+
+
+def test_a_top_row_that_falls_below_another_row_gives_way(monkeypatch):
+    # state 0 chooses between state 1 (row A) and state 2 (row B), each absorbing; the
+    # copy made with A on top, then state 1 falls below state 2: the maximum is B's
+    monkeypatch.setattr(sweeps, "TOP_ROWS_EVALUATIONS", 1e9)
+    # (intervals [0.5, 1] on the one successor: a point interval is never read from the
+    # stored critical entry, and the copy would not be used)
+    m = IMDP(3, [0, 0, 1, 2], [0, 1, 0, 0], [1, 2, 1, 2], [0.5] * 4, [1.0] * 4, n_actions=2)
+    sw = _sweeper(m, True)
+    cache = sw.upper_cache()
+    u = np.array([1.0, 0.9, 0.5])
+    sw.upper_pass(u, cache=cache)
+    assert u[0] == 0.9 and sw._top is not None
+    u[1] = 0.2
+    sw.upper_pass(u, cache=cache)
+    assert u[0] == 0.5
+
+
+def test_top_rows_are_copied_only_after_passes_of_about_one_row_per_state():
+    rng = np.random.default_rng(4)
+    m = random_imdp(rng, n_states=80, n_actions=5, max_succ=6)
+    sw = _sweeper(m, True)
+    cache = sw.upper_cache()
+    u = np.ones(m.n_states)
+    sw.upper_pass(u, cache=cache)  # every row evaluated
+    assert sw._top is None
+    for _ in range(30):
+        sw.upper_pass(u, cache=cache)  # values settle: one row a state
+    assert sw._top is not None and sw._top[0] is cache
+    other = sw.upper_cache()
+    before, flags = sw._top, sw._top[3].copy()
+    sw.upper_pass(u.copy(), cache=other)  # another cache: the copy is not used
+    assert sw._top is before
+    np.testing.assert_array_equal(before[3], flags)
+
+
+@pytest.mark.parametrize("minimize", [True, False])
 @pytest.mark.parametrize("zero_lower", [True, False])
 def test_adversary_matrix_is_an_optimal_distribution_of_every_row(minimize, zero_lower):
     # from the layout's thresholds, rows in the constructor's order, ties at the threshold
