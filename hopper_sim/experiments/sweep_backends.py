@@ -185,16 +185,18 @@ def _signals_held() -> Iterator[None]:
     held: list[int] = []
     kinds = (signal.SIGINT, signal.SIGTERM)
     previous = [signal.signal(k, lambda signum, _frame: held.append(signum)) for k in kinds]
-    blocks = hasattr(signal, "pthread_sigmask")
-    if blocks:
-        from multiprocessing import resource_tracker
-
-        resource_tracker.ensure_running()
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    blocked = False
     try:
+        if hasattr(signal, "pthread_sigmask"):
+            from multiprocessing import resource_tracker
+
+            resource_tracker.ensure_running()
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            blocked = True
         yield
     finally:
-        if blocks:  # a pending Ctrl-C is recorded here
+        # the handlers come back whatever failed above (a pending Ctrl-C is recorded first)
+        if blocked:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         for k, handler in zip(kinds, previous, strict=True):
             if handler is not None:
