@@ -56,6 +56,8 @@ model nearly every state moves in each of its 27 passes, and tracking from the s
 the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
+_NO_INDEX = np.empty(0, dtype=np.int64)
+_NO_FLAGS = np.empty(0, dtype=np.bool_)
 _NO_TOP = (np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.bool_))
 
 TOP_ROWS_EVALUATIONS = 1.05
@@ -64,8 +66,6 @@ TOP_ROWS_STALE = 0.05
 per state copies each state's top row, and later passes with the same row cache read
 those rows from the copy (:func:`planner.imdp.kernels.upper.upper_sweep`); the copy is
 made again after a pass that left more than ``TOP_ROWS_STALE`` of its states stale."""
-_NO_INDEX = np.empty(0, dtype=np.int64)
-_NO_FLAGS = np.empty(0, dtype=np.bool_)
 
 
 class ReachSweeper:
@@ -287,10 +287,11 @@ class ReachSweeper:
             # untracked; a tracked call still counts the states moved by more than its bound
             above = self._tracking[4] if track else 0.0
             tracking = (_NOT_TRACKED, _NO_INDEX, _NO_INDEX, _NO_INDEX, above)
+        untracked = tracking[0].size == 0
         use_top = (
             lazy
             and not raise_violations
-            and tracking[0].size == 0
+            and untracked
             and self._top is not None
             and self._top[0] is cache
         )
@@ -317,7 +318,7 @@ class ReachSweeper:
         )
         if track:
             self._moved = int(moved)
-        if lazy and tracking[0].size == 0:
+        if lazy and untracked:
             self._keep_top_rows(cache, int(evaluated), use_top)
         return float(dec), int(bad)
 
