@@ -43,7 +43,8 @@ and ``converged`` is ``False``).
 (``ReachResult.verified``); the floating-point checks above only steer. Where the raise
 would open a closed bracket (long stays: it sums an allowance along them), the bound as it
 is is checked first and kept if shown; a uniform raise is checked beside the widening's
-search for short stays, which stops once it is shown
+search for short stays, which stops once it is shown, and for an open bracket before that
+search, which then runs only where the raise is not shown
 (:func:`planner.imdp.widening.certified_upper`).
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,

@@ -568,6 +568,53 @@ def test_the_uniform_raise_is_shown_and_the_widening_stops(monkeypatch):
     assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
 
 
+@pytest.mark.parametrize("share", ["default", "opening"])
+def test_an_open_bracket_is_certified_by_the_uniform_raise_before_any_search(monkeypatch, share):
+    # stalled solves end with open brackets: the bound from above raised uniformly by a
+    # share of the room that the closed states leave is shown in exact arithmetic at once,
+    # keeps them closed, and no search for short stays runs. A raise that would open a
+    # closed state (a share so large that it lifts every state to 1, which is shown
+    # trivially) is refused, and the search and its check run as before
+    interval = importlib.import_module("planner.imdp.interval")
+    monkeypatch.setattr(interval, "_II_REPAIRS", 0)
+    monkeypatch.setattr(interval, "_II_WINDOW", 4)
+    monkeypatch.setattr(solve_module, "GLOBAL_REPAIR_STATES", 0)
+    if share == "opening":
+        monkeypatch.setattr(widening, "UNIFORM_SHARE", 1e12)
+    certified = widening.certified_upper
+    seen = []
+
+    def watched(m, free_rows, tol, maximize, adv, lower, upper, closed, sweeper):
+        before = len(searches)
+        out = certified(m, free_rows, tol, maximize, adv, lower, upper, closed, sweeper)
+        st = sweeper.states
+        seen.append((closed, lower[st], upper[st], out[0], out[1][st], tol, len(searches) - before))
+        return out
+
+    monkeypatch.setattr(solve_module, "certified_upper", watched)
+    searches = []
+    widen = widening.rounding_widened
+
+    def search(*args, **kw):
+        searches.append(1)
+        return widen(*args, **kw)
+
+    monkeypatch.setattr(widening, "rounding_widened", search)
+    rng = np.random.default_rng(7)
+    for _ in range(8):
+        m = random_imdp(rng, 60, 3, 5)
+        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
+        assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+    opened = [s for s in seen if not s[0]]
+    assert opened
+    for _, lower, upper, shown, bound, tol, searched in opened:
+        closed = upper - lower < tol
+        assert shown and closed.any() and np.all(bound >= upper)
+        assert np.all(bound[closed] - lower[closed] < tol)
+        assert searched == (0 if share == "default" else 1)
+
+
 @pytest.mark.parametrize("cheap", [True, False])
 def test_a_stalled_interval_iteration_is_finished(monkeypatch, cheap):
     # interval iteration stopped at its first stalled window (no repairs): on few free

@@ -214,6 +214,26 @@ def test_a_stopped_stay_search_ends_at_once():
     assert shortest_stay(matrix, rs, start)[0][0] == 0
 
 
+def test_the_block_bound_asks_its_stop_between_its_checks():
+    # a stop that comes before the first check (32 steps) ends the products within
+    # ``_STOP_EVERY`` of them, not at the next check (where 256 products may lie between)
+    from planner.imdp import stay
+
+    products: list[int] = []
+
+    class Counted(sp.csr_matrix):
+        def __matmul__(self, other):
+            products.append(1)
+            return super().__matmul__(other)
+
+    sub = Counted(sp.csr_matrix([[1.0 - 1e-3]]))
+    assert stay.block_stay_bound(sub, limit=1e6, stop=lambda: True) == np.inf
+    assert len(products) == stay._STOP_EVERY < stay._BLOCK_FIRST
+    products.clear()
+    assert stay.block_stay_bound(sub, limit=1e6, stop=lambda: False) < np.inf
+    assert len(products) >= stay._BLOCK_FIRST
+
+
 def test_block_stay_bound_of_a_self_loop_is_tight_and_sound():
     from planner.imdp.stay import block_stay_bound
 
