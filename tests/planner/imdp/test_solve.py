@@ -568,6 +568,46 @@ def test_the_uniform_raise_is_shown_and_the_widening_stops(monkeypatch):
     assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
 
 
+def test_a_large_model_widens_along_the_greedy_rows_unless_they_stay_too_long(monkeypatch):
+    # beyond SI_MAX_STATES free states (here: any) the widening first takes the rows
+    # greedy for the bound from above: on random models they leave soon, and no search
+    # for short stays runs. Where the greedy row creeps (a self-loop that keeps the upper
+    # bound, 1e9 steps) its widening would not fit in the room left to the tolerance, and
+    # the search finds the row that leaves at once
+    monkeypatch.setattr(widening, "SI_MAX_STATES", 0)
+    searches = []
+    search = widening._short_stay_chain
+
+    def counted(*args, **kw):
+        searches.append(1)
+        return search(*args, **kw)
+
+    monkeypatch.setattr(widening, "_short_stay_chain", counted)
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        m = random_imdp(rng, 60, 3, 5)
+        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
+        assert sol.converged and np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+    assert not searches
+    eps, d = 1e-9, 1e-11
+    # state 0: creep (self-loop 1 - 2 eps, eps to each end: value 1/2) or jump (a hair
+    # less than 1/2 to the goal)
+    p = [1 - 2 * eps, eps, eps, 0.5 - d, 0.5 + d, 1.0, 1.0]
+    m = IMDP(
+        3,
+        [0, 0, 0, 0, 0, 1, 2],
+        [0, 0, 0, 1, 1, 0, 0],
+        [0, 1, 2, 1, 2, 1, 2],
+        p,
+        p,
+        labels=[(), ("goal",), ("bad",)],
+        propositions=("bad", "goal"),
+    )
+    sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+    assert searches and sol.converged and sol.lower[0] <= 0.5 <= sol.upper[0]
+
+
 @pytest.mark.parametrize("share", ["default", "opening"])
 def test_an_open_bracket_is_certified_by_the_uniform_raise_before_any_search(monkeypatch, share):
     # stalled solves end with open brackets: the bound from above raised uniformly by a
