@@ -568,6 +568,32 @@ def test_the_uniform_raise_is_shown_and_the_widening_stops(monkeypatch):
     assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
 
 
+def _counted_calls(monkeypatch, module, name: str) -> list[int]:
+    """``module.name`` replaced by a wrapper that records each call; the record."""
+    calls: list[int] = []
+    function = getattr(module, name)
+
+    def counted(*args, **kw):
+        calls.append(1)
+        return function(*args, **kw)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def _solved_random(rng: np.random.Generator, count: int) -> list:
+    """Pessimistic maximal reach-avoid on ``count`` random 60-state models, each solution
+    checked to bracket the reference values."""
+    out = []
+    for _ in range(count):
+        m = random_imdp(rng, 60, 3, 5)
+        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
+        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
+        assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+        out.append(sol)
+    return out
+
+
 def test_a_large_model_widens_along_the_greedy_rows_unless_they_stay_too_long(monkeypatch):
     # beyond SI_MAX_STATES free states (here: any) the widening first takes the rows
     # greedy for the bound from above: on random models they leave soon, and no search
@@ -575,20 +601,8 @@ def test_a_large_model_widens_along_the_greedy_rows_unless_they_stay_too_long(mo
     # bound, 1e9 steps) its widening would not fit in the room left to the tolerance, and
     # the search finds the row that leaves at once
     monkeypatch.setattr(widening, "SI_MAX_STATES", 0)
-    searches = []
-    search = widening._short_stay_chain
-
-    def counted(*args, **kw):
-        searches.append(1)
-        return search(*args, **kw)
-
-    monkeypatch.setattr(widening, "_short_stay_chain", counted)
-    rng = np.random.default_rng(3)
-    for _ in range(4):
-        m = random_imdp(rng, 60, 3, 5)
-        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
-        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
-        assert sol.converged and np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+    searches = _counted_calls(monkeypatch, widening, "_short_stay_chain")
+    assert all(sol.converged for sol in _solved_random(np.random.default_rng(3), 4))
     assert not searches
     eps, d = 1e-9, 1e-11
     # state 0: creep (self-loop 1 - 2 eps, eps to each end: value 1/2) or jump (a hair
@@ -632,20 +646,8 @@ def test_an_open_bracket_is_certified_by_the_uniform_raise_before_any_search(mon
         return out
 
     monkeypatch.setattr(solve_module, "certified_upper", watched)
-    searches = []
-    widen = widening.rounding_widened
-
-    def search(*args, **kw):
-        searches.append(1)
-        return widen(*args, **kw)
-
-    monkeypatch.setattr(widening, "rounding_widened", search)
-    rng = np.random.default_rng(7)
-    for _ in range(8):
-        m = random_imdp(rng, 60, 3, 5)
-        sol = solve(Problem(m, Specification(ReachAvoid("goal", "bad"))))
-        ref = ref_reach(m, m.states_labelled("goal"), m.states_labelled("bad"), True)
-        assert np.all(sol.lower <= ref + 1e-9) and np.all(ref <= sol.upper + 1e-9)
+    searches = _counted_calls(monkeypatch, widening, "rounding_widened")
+    _solved_random(np.random.default_rng(7), 8)
     opened = [s for s in seen if not s[0]]
     assert opened
     for _, lower, upper, shown, bound, tol, searched in opened:
