@@ -58,10 +58,9 @@ CHECK_LEAST_FALL = 0.05
 violations. The failing candidates after a stalled interval iteration on the 100 x 100
 benchmark grid (seeds 0-40: 6 candidates, none shown) kept 1,100-9,100 violations that
 fell by 0.1-2 % a pass (one by 15 %, then 11 %, then under 6 %) and used all
-``OVI_PASSES`` (95-126 ms each). The repairs'
-candidates there were shown in at most four passes. :func:`verify_upper`, the proof,
-keeps the plain rule: one of its shown checks there went 32, 26, 25, 26 violations
-before it fell to 0."""
+``OVI_PASSES`` (95-126 ms each). The repairs' candidates there were shown in at most four
+passes. :func:`verify_upper`, the proof, keeps the plain rule: one of its shown checks
+there went 32, 26, 25, 26 violations before it fell to 0."""
 
 
 def _until_clean(one_pass, passes: int, least_fall: float = 0.0) -> tuple[bool, int]:

@@ -87,9 +87,10 @@ def rounding_widened(
         chosen = np.searchsorted(free_rows, np.sort(choice[st]))
         chain = sweeper.adversary_matrix(upper, chosen)
         allowance = chain_stay_allowance(chain, rs[chosen], upper, ROUNDING, SI_MAX_STATES)
-        room = widening_room(lower[st], upper[st], tolerance)
-        if maximize and not float(np.max(allowance[st], initial=0.0)) <= room:
-            allowance = None  # stays too long for the room: the search for short ones
+        if maximize:
+            room = widening_room(lower[st], upper[st], tolerance)
+            if not float(np.max(allowance[st], initial=0.0)) <= room:
+                allowance = None  # stays too long for the room: the search for short ones
     if allowance is None:
         found = _short_stay_chain(m, free_rows, rs, seg, lower, upper, q, tolerance, sweeper, stop)
         if found is None:
