@@ -28,6 +28,7 @@ import numpy as np
 
 from planner.errors import ProductError
 from planner.imdp import graph
+from planner.imdp.closed import closed_accepting
 from planner.imdp.graph import EndComponent, SubModel
 from planner.imdp.model import IMDP
 from planner.imdp.product import ProductIMDP
@@ -77,8 +78,17 @@ def optimistic_accepting_states(product: ProductIMDP, rows: np.ndarray | None = 
 def failure_states(product: ProductIMDP) -> np.ndarray:
     """States with best-case probability 0 of satisfying the formula (graph-exact): no
     ``upper > 0`` path to an end component that a cooperative adversary keeps visiting some
-    ``G_i`` and no ``B_i``."""
-    return ~graph.possible_reach(product.model, optimistic_accepting_states(product))
+    ``G_i`` and no ``B_i``. For a pair whose ``G_i \\ B_i`` no row leaves
+    (:func:`planner.imdp.closed.closed_accepting`) that set stands in for its components:
+    its every state has a path to one inside it (a bottom strongly connected component of
+    its rows, all of whose states are in ``G_i``), and every such component lies inside it
+    (one that visits ``G_i \\ B_i`` cannot leave it)."""
+    m = product.model
+    target = np.zeros(product.n_states, dtype=bool)
+    for g, b in zip(product.good, product.bad, strict=True):
+        closed = closed_accepting(m, g, b)
+        target |= graph.optimistic_accepting_states(m, g, b) if closed is None else closed
+    return ~graph.possible_reach(m, target)
 
 
 def satisfaction(

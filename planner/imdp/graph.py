@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from planner.errors import SpecificationError
+from planner.imdp.closed import closed_accepting
 from planner.imdp.kernels import (
     attractor,
     attractor_of_rows,
@@ -400,9 +401,14 @@ def accepting_end_components(
     together by edges with ``lower == 0`` does not qualify when the adversary can cut the
     way to ``good``.) Computed by alternating :func:`robust_buchi_region` with the MEC
     decomposition until each component is its own Büchi region, from the states that avoid
-    ``bad`` and lie between ``good`` states (:func:`recurrence_candidates`).
+    ``bad`` and lie between ``good`` states (:func:`recurrence_candidates`). Where no row
+    leaves ``good & ~bad`` (:func:`planner.imdp.closed.closed_accepting`) every end
+    component inside it qualifies and no other does: its maximal end components.
     """
     rows = _all_rows(model, rows)
+    closed = closed_accepting(model, good, bad, rows)
+    if closed is not None:
+        return maximal_end_components(model, rows=rows, states=closed)
     good = np.asarray(good, dtype=bool)
     start = recurrence_candidates(model, good, ~np.asarray(bad, dtype=bool), rows)
     out: list[EndComponent] = []

@@ -121,12 +121,12 @@ def test_kernel_notice(capsys):
 FIRST_SYNTHESIS = """
 import numba
 import numpy as np
-from planner.imdp.kernels import components, rows, search, sweeps, upper
+from planner.imdp.kernels import components, pruning, rows, search, sweeps, upper
 from planner.warmup import compile_kernels
 
 def signatures():
     return {f"{m.__name__}.{n}": len(d.signatures)
-            for m in (components, rows, search, sweeps, upper)
+            for m in (components, pruning, rows, search, sweeps, upper)
             for n, d in vars(m).items() if isinstance(d, numba.core.registry.CPUDispatcher)}
 
 compile_kernels()

@@ -115,3 +115,19 @@ def drop_states(
                     bad[s] = True
                     queue[tail] = s
                     tail += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def closed_under(states, rows, state_ptr, row_ptr, successor, upper) -> bool:
+    """Whether every row of ``rows`` at a state of ``states`` keeps every ``upper > 0``
+    successor in ``states`` (the first entry that leaves ends the search)."""
+    for s in range(states.size):
+        if not states[s]:
+            continue
+        for r in range(state_ptr[s], state_ptr[s + 1]):
+            if not rows[r]:
+                continue
+            for e in range(row_ptr[r], row_ptr[r + 1]):
+                if upper[e] > 0.0 and not states[successor[e]]:
+                    return False
+    return True
