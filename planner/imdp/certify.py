@@ -29,7 +29,12 @@ from scipy.sparse.csgraph import connected_components
 
 from planner._util.threads import in_halves
 from planner.imdp.graph import end_component_labels
-from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
+from planner.imdp.kernels import (
+    ReachSweeper,
+    component_exit_bound,
+    counting_order,
+    prune_kernel,
+)
 from planner.imdp.kernels.verify import raise_pass, state_excesses
 from planner.imdp.model import IMDP, first_of_runs, row_entries
 from planner.modes import Adversary
@@ -160,6 +165,28 @@ def optimistic_candidate(
     return (u if ok else None), passes
 
 
+def free_end_components(
+    model: IMDP, rows: np.ndarray, free: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`planner.imdp.graph.end_component_labels` (pessimistic) of the ``rows`` at the
+    ``free`` states, searched for only among the states that survive the pruning cascade
+    (:func:`planner.imdp.kernels.prune_kernel`: a state goes once each of its rows may
+    enter a state gone or not free). The survivors are the largest set of free states
+    each with a row that stays among them, so every end component lies there, with rows
+    that stay there: the same components and rows, and where none survives (every
+    benchmark model: the cascade ends them all) no decomposition at all. On the random
+    100k-state benchmark model the cascade took 21-39 ms against 89-161 ms for the
+    decomposition of all free states; on the 100 x 100 grid 15 ms against 23-25 ms."""
+    m = model
+    ptr, inc_row, _, _, inc_upper = m.reverse_index()
+    arrays = (m.row_state, m.state_ptr, m.row_ptr, m.successor, m.upper, ptr, inc_row, inc_upper)
+    gone, stay, _ = prune_kernel(~free, rows, *arrays, np.zeros(m.n_states, dtype=bool))
+    alive = free & ~gone
+    if not alive.any():
+        return np.full(m.n_states, -1, dtype=np.int64), np.zeros(m.n_rows, dtype=bool)
+    return end_component_labels(m, stay, alive, Adversary.PESSIMISTIC)
+
+
 class EndComponentBounds:
     """Bounds from the maximal end components of the free states, for maximal reachability
     against a minimising adversary (interval iteration with end-component deflation:
@@ -195,11 +222,18 @@ class EndComponentBounds:
         self.sweeper = sweeper
         row_mask = np.zeros(m.n_rows, dtype=bool)
         row_mask[sweeper.rows] = True
-        comp, kept = end_component_labels(m, row_mask, free, Adversary.PESSIMISTIC)
+        comp, kept = free_end_components(m, row_mask, free)
         members = np.flatnonzero(comp >= 0)
         labels, label_of = np.unique(comp[members], return_inverse=True)
         n_comp = labels.size
         self.n_components = int(n_comp)
+        if n_comp == 0:
+            # no component (the usual case): nothing to deflate or collapse
+            none = np.zeros(0, dtype=np.int64)
+            _, self._member_ptr = counting_order(none, 0)
+            self._members = self._exit_rows = self._all = self._traversable = none
+            self._exit_ptr = self._member_ptr
+            return
         dense = np.full(m.n_states, -1, dtype=np.int64)
         dense[members] = label_of
         order, self._member_ptr = counting_order(label_of.astype(np.int64), n_comp)

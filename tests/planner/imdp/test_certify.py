@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from planner.imdp import IMDP, Problem, ReachAvoid, Specification, ValueIteration, solve
-from planner.imdp.certify import EndComponentBounds
+from planner.imdp.certify import EndComponentBounds, free_end_components
+from planner.imdp.graph import end_component_labels
 from planner.imdp.kernels import ReachSweeper
+from planner.modes import Adversary
 from tests.planner.imdp.reference import random_imdp, ref_reach
 
 solve_module = importlib.import_module("planner.imdp.strategy")
@@ -39,6 +41,27 @@ def bounds_for(m: IMDP, free: np.ndarray) -> EndComponentBounds:
     free_rows = np.flatnonzero(free[m.row_state])
     sweeper = ReachSweeper(m, free_rows, np.zeros(m.n_states), True, True)
     return EndComponentBounds(m, sweeper, free)
+
+
+def _partition(comp: np.ndarray) -> list[tuple[int, ...]]:
+    return sorted(tuple(np.flatnonzero(comp == c).tolist()) for c in np.unique(comp[comp >= 0]))
+
+
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_the_free_states_components_lie_among_the_survivors_of_the_cascade(zero_lower):
+    rng = np.random.default_rng(11 + zero_lower)
+    some = none = 0
+    for _ in range(120):
+        m = random_imdp(rng, int(rng.integers(4, 40)), 3, 4, zero_lower)
+        free = rng.random(m.n_states) < 0.85
+        rows = free[m.row_state] & (rng.random(m.n_rows) < 0.9)
+        comp, kept = free_end_components(m, rows, free)
+        want, want_kept = end_component_labels(m, rows, free, Adversary.PESSIMISTIC)
+        assert _partition(comp) == _partition(want)
+        np.testing.assert_array_equal(kept, want_kept)
+        some += bool((want >= 0).any())
+        none += not (want >= 0).any()
+    assert some > 20 and none > 20
 
 
 def test_loop_with_exit_is_one_traversable_component():

@@ -48,7 +48,8 @@ def test_closed_pairs_give_what_the_end_component_searches_give(zero_lower, monk
     for k in range(80):
         m = random_imdp(rng, int(rng.integers(5, 25)), 3, 4, zero_lower)
         p = ProductIMDP(m, _automata()[k % 2])
-        found = [closed_accepting(p.model, g, b) is not None for g, b in zip(p.good, p.bad)]
+        pairs = zip(p.good, p.bad, strict=True)
+        found = [closed_accepting(p.model, g, b) is not None for g, b in pairs]
         closed += sum(found)
         leaving += len(found) - sum(found)
         fail = analysis.failure_states(p)
