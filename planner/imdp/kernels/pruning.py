@@ -1,7 +1,8 @@
 """The rows that stay in a set and the pruning cascade of removed states, compiled: a row
 goes when it may (``upper > 0``) enter a removed state, and a state goes when it has no
-row left (Jiang et al. 2023, Alg. 1), for the pruning of unsafe states and for the
-shrinking candidate set of the almost-sure search."""
+row left (Jiang et al. 2023, Alg. 1), for the pruning of unsafe states, the shrinking
+candidate set of the almost-sure search and the states that may hold end components; and
+whether no row leaves a set (:func:`closed_under`)."""
 
 from __future__ import annotations
 
