@@ -149,7 +149,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def _terminated(signum: int, frame: Any) -> None:
-    if interrupt_here(signum, frame):  # else numba compiles: delivered again later
+    if interrupt_here(signum, frame):  # else delivered again later
         raise KeyboardInterrupt(f"signal {signum}")
 
 
@@ -157,8 +157,9 @@ def _terminated(signum: int, frame: Any) -> None:
 def _signals_as_interrupt() -> Iterator[None]:
     """SIGTERM raises KeyboardInterrupt inside the block (main thread only), so that the
     interrupt handling of the commands (keep finished results, remove temporary files)
-    applies to it too, and so does SIGINT, both deferred while numba compiles
-    (:mod:`hopnav.interrupts`); the previous handlers are restored after."""
+    applies to it too, and so does SIGINT, both deferred where an exception cannot land
+    safely (numba, torch, an import, a thread pool starting: :mod:`hopnav.interrupts`);
+    the previous handlers are restored after."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -210,7 +210,7 @@ class _WholeEvents:
     def _signal(self, signum: int, frame) -> None:
         if self._busy:
             self._pending = signum
-        elif interrupt_here(signum, frame):  # else numba compiles: delivered again later
+        elif interrupt_here(signum, frame):  # else delivered again later
             self._raised = signum
             raise KeyboardInterrupt(f"signal {signum}")
 

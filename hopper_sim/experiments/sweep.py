@@ -157,10 +157,18 @@ def run_sweep(
         run = default_run_function()
     stream = _stream(backend, run, scenario, todo, workers, ray_address)
     t0 = time.perf_counter()
-    for done, (task, row) in enumerate(stream, start=1):
-        results[task.index] = row
-        if progress is not None:
-            progress(done, len(todo), row)
+    try:
+        for done, (task, row) in enumerate(stream, start=1):
+            results[task.index] = row
+            if progress is not None:
+                progress(done, len(todo), row)
+    finally:
+        # A Ctrl-C or error in ``progress`` leaves the backend suspended at its ``yield``,
+        # its workers running; closing it ends them now. Left to the garbage collector, a
+        # process pool would instead run every pending task at interpreter exit.
+        close = getattr(stream, "close", None)
+        if close is not None:
+            close()
     rows = tuple(r for r in results if r is not None)
     return SweepResult(
         scenario=scenario.name,

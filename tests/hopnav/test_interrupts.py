@@ -1,4 +1,5 @@
-"""Ctrl-C deferred while numba compiles (hopnav.interrupts)."""
+"""Ctrl-C deferred where it cannot land safely: numba, torch, imports, a thread pool
+starting (hopnav.interrupts)."""
 
 from __future__ import annotations
 
@@ -24,13 +25,37 @@ def _frame_in(filename: str):
     return space["here"]()
 
 
-def test_frames_of_numba_and_llvmlite_count_as_the_compiler():
-    for name in ("numba", "llvmlite"):
+def test_frames_of_numba_llvmlite_torch_imports_and_thread_pools_are_unsafe():
+    for name in ("numba", "llvmlite", "torch"):
         path = os.sep.join(["", "site-packages", name, "core", "x.py"])
-        assert interrupts.in_compiler(_frame_in(path))
-    assert not interrupts.in_compiler(_frame_in(os.sep.join(["", "work", "planner", "x.py"])))
-    assert not interrupts.in_compiler(sys._getframe())
-    assert not interrupts.in_compiler(None)
+        assert interrupts.in_unsafe_code(_frame_in(path))
+    for path in ("<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>"):
+        assert interrupts.in_unsafe_code(_frame_in(path))
+    pool = os.sep.join(["", "lib", "python3.11", "concurrent", "futures", "thread.py"])
+    assert interrupts.in_unsafe_code(_frame_in(pool))
+    waiting = os.sep.join(["", "lib", "python3.11", "concurrent", "futures", "_base.py"])
+    assert not interrupts.in_unsafe_code(_frame_in(waiting))  # waiting on a result is safe
+    assert not interrupts.in_unsafe_code(_frame_in(os.sep.join(["", "work", "planner", "x.py"])))
+    assert not interrupts.in_unsafe_code(sys._getframe())
+    assert not interrupts.in_unsafe_code(None)
+
+
+def test_the_code_of_a_module_being_imported_is_unsafe(tmp_path, monkeypatch):
+    """A module's own code runs below importlib's frames while it is imported (an
+    extension's initialisation may call it), and not once it is."""
+    (tmp_path / "hopnav_probe_module.py").write_text(
+        "import sys\nfrom hopnav.interrupts import in_unsafe_code\n"
+        "DURING = in_unsafe_code(sys._getframe())\n"
+        "def after():\n    return in_unsafe_code(sys._getframe())\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import hopnav_probe_module as probe
+
+    try:
+        assert probe.DURING is True
+        assert probe.after() is False
+    finally:
+        sys.modules.pop("hopnav_probe_module", None)
 
 
 def test_an_interrupt_inside_the_compiler_is_delivered_again_later(monkeypatch):

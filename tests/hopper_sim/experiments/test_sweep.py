@@ -17,6 +17,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -270,6 +271,38 @@ def test_process_backend_keeps_a_ctrl_c_that_comes_while_the_workers_start(scena
         signal.signal(signal.SIGINT, previous)
     assert multiprocessing.active_children() == []  # the workers were ended and joined
     assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
+def slow_after_the_first(scenario, seed: int, run_index: int) -> RunEnd:
+    """:func:`fake_run`, after a minute for every run but the first of its cell."""
+    if run_index > 0:
+        time.sleep(60.0)
+    return fake_run(scenario, seed, run_index)
+
+
+def test_process_backend_ends_its_workers_when_progress_raises(scenario):
+    """A Ctrl-C in ``progress`` (the CLI writes its rows file there) ends the runs in
+    progress at once, while the traceback still holds the sweep's frames. Before the fix the
+    pool stayed open until the interpreter exited, which then ran every pending run (a
+    minute each here; ``hopnav sweep`` printed "interrupted" and went on)."""
+
+    def interrupt(done, total, row):
+        raise KeyboardInterrupt
+
+    spec = SweepSpec(cs=(0.5,), epss=(0.005,), runs=3)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt) as raised:
+        run_sweep(
+            scenario,
+            spec,
+            run=slow_after_the_first,
+            backend="process",
+            workers=2,
+            progress=interrupt,
+        )
+    assert raised.traceback  # the frames are still referenced here
+    assert multiprocessing.active_children() == []
+    assert time.monotonic() - start < 50.0
 
 
 @pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="POSIX signal masks")
