@@ -13,11 +13,11 @@ sweep`` interrupted in its first seconds; ``/work/exp/sigstress.py`` in the clos
   process with ``std::terminate`` (SIGABRT, "pybind11::error_already_set") or passes
   through ``PyRun_String``, which marks the interrupt as unhandled for the whole process,
   so that Python kills itself with SIGINT when it exits, although the command caught it
-  and said "interrupted" (exit status -2 instead of 1; 5 of 45 tries in the first 3 s);
+  and said "interrupted" (exit status -2 instead of 1; 19 of 184 tries);
 - an import, which runs such modules' initialisation;
 - a thread pool starting a worker (``concurrent/futures/thread.py``): interrupted inside
   ``Thread.start``, the thread runs but is not registered for the pool's shutdown, and the
-  interpreter waits for it at exit for ever (1 of about 75 tries).
+  interpreter waits for it at exit for ever (4 of 184 tries).
 
 :func:`interrupt_here` defers such a signal by 10 ms until no such frame is on the stack,
 which delays an interrupt by at most one import, kernel compilation or torch call.
