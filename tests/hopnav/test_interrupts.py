@@ -108,3 +108,86 @@ def test_the_command_takes_an_interrupt_once_the_compiler_has_returned(kind):
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0
     assert out.strip() == "interrupted after ['compiled']"
+
+
+_POOL_SCRIPT = textwrap.dedent(
+    """
+    import os, signal, threading, time
+    from concurrent.futures import ThreadPoolExecutor
+    from hopnav.cli import _signals_as_interrupt
+    start = threading.Thread.start
+
+    def start_then_interrupt(self):
+        # the window of the hang: the pool's thread runs, not yet registered for shutdown
+        start(self)
+        os.kill(os.getpid(), signal.SIGINT)
+        t = time.monotonic()
+        while time.monotonic() - t < 0.5:
+            pass
+
+    threading.Thread.start = start_then_interrupt
+    pool = ThreadPoolExecutor(1)
+    where = "inside submit"
+    with _signals_as_interrupt():
+        try:
+            pool.submit(time.sleep, 0.01)
+            where = "after submit"
+            t = time.monotonic()
+            while time.monotonic() - t < 10.0:
+                pass
+            print("no interrupt")
+        except KeyboardInterrupt:
+            print("interrupted", where, flush=True)
+    """
+)
+
+
+def test_an_interrupt_while_a_thread_pool_starts_its_thread_waits_and_the_process_exits():
+    """Raised inside ``submit`` after the pool's thread started, an interrupt left the
+    thread unregistered, and the interpreter waited for it at exit for ever (a sweep
+    interrupted in its first seconds hung so in CI). Deferred, it comes after ``submit``,
+    and the process exits."""
+    proc = subprocess.run(
+        [sys.executable, "-c", _POOL_SCRIPT],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "interrupted after submit"
+
+
+_IMPORT_SCRIPT = textwrap.dedent(
+    """
+    import os, signal, threading, time
+    from hopnav.cli import _signals_as_interrupt
+    where = "during the import"
+    threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+    with _signals_as_interrupt():
+        try:
+            import torch
+            where = "after the import"
+            t = time.monotonic()
+            while time.monotonic() - t < 10.0:
+                pass
+            print("no interrupt")
+        except KeyboardInterrupt:
+            print("interrupted", where, flush=True)
+    """
+)
+
+
+def test_an_interrupt_during_the_import_of_torch_comes_after_it():
+    """Raised inside torch's import, an interrupt passes through its C++ (pybind11): the
+    process aborted, or Python, told the interrupt was unhandled, killed itself with SIGINT
+    at exit although the command had caught it (status -2)."""
+    proc = subprocess.run(
+        [sys.executable, "-c", _IMPORT_SCRIPT],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "interrupted after the import"
