@@ -57,10 +57,15 @@ def interrupt_here(signum: int, frame: FrameType | None) -> bool:
     main thread again in 10 ms (``_thread.interrupt_main``), and the handler should return."""
     if not in_unsafe_code(frame):
         return True
-    # a bare thread: ``threading.Thread.start`` takes a lock that the interrupted code may
-    # hold (it may be starting a thread itself), and the interpreter never waits for it
-    _thread.start_new_thread(_deliver_later, (signum,))
+    deliver_again(signum)
     return False
+
+
+def deliver_again(signum: int) -> None:
+    """Deliver ``signum`` to the main thread again in 10 ms, from a bare thread:
+    ``threading.Thread.start`` takes a lock that the interrupted code may hold (it may be
+    starting a thread itself), and the interpreter never waits for a bare thread at exit."""
+    _thread.start_new_thread(_deliver_later, (signum,))
 
 
 def _deliver_later(signum: int) -> None:

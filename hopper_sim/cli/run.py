@@ -28,7 +28,7 @@ from hopnav.arguments import (
     run_config,
 )
 from hopnav.errors import RunFailed, UsageError, is_interrupt
-from hopnav.interrupts import interrupt_here
+from hopnav.interrupts import deliver_again, interrupt_here
 from hopnav.kernels import prepare_kernels
 from planner.modes import Candidates, TourMode
 
@@ -219,11 +219,8 @@ class _WholeEvents:
         callback (numba's llvmlite objects are finalised while kernels compile) is printed
         and dropped by Python; deliver it again instead, once the finaliser has returned."""
         if isinstance(unraisable.exc_value, KeyboardInterrupt) and self._raised is not None:
-            import _thread
-            import threading
-
             # from another thread: raised here, in the hook, it would be dropped again
-            threading.Timer(0.01, _thread.interrupt_main, (self._raised,)).start()
+            deliver_again(self._raised)
         else:
             self._previous_hook(unraisable)
 
