@@ -110,36 +110,54 @@ def test_the_command_takes_an_interrupt_once_the_compiler_has_returned(kind):
     assert out.strip() == "interrupted after ['compiled']"
 
 
-_POOL_SCRIPT = textwrap.dedent(
-    """
-    import os, signal, threading, time
-    from concurrent.futures import ThreadPoolExecutor
-    from hopnav.cli import _signals_as_interrupt
-    start = threading.Thread.start
+def _interrupted(setup: str, step: str, timeout: float) -> str:
+    """Run ``step`` under the commands' handlers in a fresh process (after ``setup``, which
+    arranges the interrupt) and return where the interrupt came: "during" or "after"
+    ``step``. The process must exit with status 0 within ``timeout`` seconds."""
+    body = textwrap.indent(textwrap.dedent(step).strip(), " " * 8)
+    code = textwrap.dedent(setup) + textwrap.dedent(
+        """
+        from hopnav.cli import _signals_as_interrupt
+        where = "during"
+        with _signals_as_interrupt():
+            try:
+        {body}
+                where = "after"
+                t = time.monotonic()
+                while time.monotonic() - t < 10.0:
+                    pass
+                print("no interrupt")
+            except KeyboardInterrupt:
+                print(where, flush=True)
+        """
+    ).replace("{body}", body)
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout.strip()
 
-    def start_then_interrupt(self):
-        # the window of the hang: the pool's thread runs, not yet registered for shutdown
-        start(self)
-        os.kill(os.getpid(), signal.SIGINT)
-        t = time.monotonic()
-        while time.monotonic() - t < 0.5:
-            pass
 
-    threading.Thread.start = start_then_interrupt
-    pool = ThreadPoolExecutor(1)
-    where = "inside submit"
-    with _signals_as_interrupt():
-        try:
-            pool.submit(time.sleep, 0.01)
-            where = "after submit"
-            t = time.monotonic()
-            while time.monotonic() - t < 10.0:
-                pass
-            print("no interrupt")
-        except KeyboardInterrupt:
-            print("interrupted", where, flush=True)
-    """
-)
+_START_THEN_INTERRUPT = """
+import os, signal, threading, time
+from concurrent.futures import ThreadPoolExecutor
+start = threading.Thread.start
+
+def start_then_interrupt(self):
+    # the window of the hang: the pool's thread runs, not yet registered for shutdown
+    start(self)
+    os.kill(os.getpid(), signal.SIGINT)
+    t = time.monotonic()
+    while time.monotonic() - t < 0.5:
+        pass
+
+threading.Thread.start = start_then_interrupt
+pool = ThreadPoolExecutor(1)
+"""
 
 
 def test_an_interrupt_while_a_thread_pool_starts_its_thread_waits_and_the_process_exits():
@@ -147,47 +165,17 @@ def test_an_interrupt_while_a_thread_pool_starts_its_thread_waits_and_the_proces
     thread unregistered, and the interpreter waited for it at exit for ever (a sweep
     interrupted in its first seconds hung so in CI). Deferred, it comes after ``submit``,
     and the process exits."""
-    proc = subprocess.run(
-        [sys.executable, "-c", _POOL_SCRIPT],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout.strip() == "interrupted after submit"
+    assert _interrupted(_START_THEN_INTERRUPT, "pool.submit(time.sleep, 0.01)", 60) == "after"
 
 
-_IMPORT_SCRIPT = textwrap.dedent(
-    """
-    import os, signal, threading, time
-    from hopnav.cli import _signals_as_interrupt
-    where = "during the import"
-    threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
-    with _signals_as_interrupt():
-        try:
-            import torch
-            where = "after the import"
-            t = time.monotonic()
-            while time.monotonic() - t < 10.0:
-                pass
-            print("no interrupt")
-        except KeyboardInterrupt:
-            print("interrupted", where, flush=True)
-    """
-)
+_SOON = """
+import os, signal, threading, time
+threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+"""
 
 
 def test_an_interrupt_during_the_import_of_torch_comes_after_it():
     """Raised inside torch's import, an interrupt passes through its C++ (pybind11): the
     process aborted, or Python, told the interrupt was unhandled, killed itself with SIGINT
     at exit although the command had caught it (status -2)."""
-    proc = subprocess.run(
-        [sys.executable, "-c", _IMPORT_SCRIPT],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout.strip() == "interrupted after the import"
+    assert _interrupted(_SOON, "import torch", 120) == "after"
