@@ -3,7 +3,7 @@
 The commands turn SIGINT and SIGTERM into ``KeyboardInterrupt`` so that an interrupted run
 keeps what finished. Python raises it at the next bytecode of the main thread, wherever
 that is, and some places cannot take it (each measured on ``hopnav run`` or ``hopnav
-sweep`` interrupted in its first seconds; ``/work/exp/sigstress.py`` in the closing notes):
+sweep`` interrupted in its first seconds; ``docs/design.md``, "Interruptions"):
 
 - numba compiling or loading a kernel from its cache: its llvmlite objects free their
   LLVM handles in Python finalisers, and an exception raised there leaves a handle half

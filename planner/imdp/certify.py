@@ -28,13 +28,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from planner._util.threads import in_halves
-from planner.imdp.graph import end_component_labels
-from planner.imdp.kernels import (
-    ReachSweeper,
-    component_exit_bound,
-    counting_order,
-    prune_kernel,
-)
+from planner.imdp.graph import end_component_labels, pruned_rows
+from planner.imdp.kernels import ReachSweeper, component_exit_bound, counting_order
 from planner.imdp.kernels.verify import raise_pass, state_excesses
 from planner.imdp.model import IMDP, first_of_runs, row_entries
 from planner.modes import Adversary
@@ -170,17 +165,15 @@ def free_end_components(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`planner.imdp.graph.end_component_labels` (pessimistic) of the ``rows`` at the
     ``free`` states, searched for only among the states that survive the pruning cascade
-    (:func:`planner.imdp.kernels.prune_kernel`: a state goes once each of its rows may
-    enter a state gone or not free). The survivors are the largest set of free states
-    each with a row that stays among them, so every end component lies there, with rows
-    that stay there: the same components and rows, and where none survives (every
-    benchmark model: the cascade ends them all) no decomposition at all. On the random
-    100k-state benchmark model the cascade took 21-39 ms against 89-161 ms for the
-    decomposition of all free states; on the 100 x 100 grid 15 ms against 23-25 ms."""
+    (:func:`planner.imdp.graph.pruned_rows`: a state goes once each of its rows may enter
+    a state gone or not free). The survivors are the largest set of free states each with
+    a row that stays among them, so every end component lies there, with rows that stay
+    there: the same components and rows, and where none survives (every benchmark model:
+    the cascade ends them all) no decomposition at all. On the random 100k-state benchmark
+    model the cascade took 21-39 ms against 89-161 ms for the decomposition of all free
+    states; on the 100 x 100 grid 15 ms against 23-25 ms."""
     m = model
-    ptr, inc_row, _, _, inc_upper = m.reverse_index()
-    arrays = (m.row_state, m.state_ptr, m.row_ptr, m.successor, m.upper, ptr, inc_row, inc_upper)
-    gone, stay, _ = prune_kernel(~free, rows, *arrays, np.zeros(m.n_states, dtype=bool))
+    gone, stay = pruned_rows(m, ~free, rows)
     alive = free & ~gone
     if not alive.any():
         return np.full(m.n_states, -1, dtype=np.int64), np.zeros(m.n_rows, dtype=bool)

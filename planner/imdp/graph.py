@@ -476,22 +476,22 @@ class SubModel:
     actions: np.ndarray
 
 
+def pruned_rows(
+    model: IMDP, removed: np.ndarray, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cascade of :func:`prune` without the sub-model: ``(gone, kept)``, the states
+    removed (``removed`` and those left without rows) and the rows kept."""
+    m = model
+    ptr, inc_row, _, inc_upper = m.incoming()
+    gone, kept, _ = prune_kernel(
+        np.asarray(removed, dtype=bool), _all_rows(m, rows), m.row_state, m.state_ptr,
+        m.row_ptr, m.successor, m.upper, ptr, inc_row, inc_upper, np.zeros(m.n_states, bool),
+    )  # fmt: skip
+    return gone, kept
+
+
 def prune(model: IMDP, removed: np.ndarray, rows: np.ndarray | None = None) -> SubModel:
     """Remove the rows that may enter ``removed``, then the states left without rows, and
     repeat until nothing changes (Jiang et al. 2023, Algorithm 1)."""
-    r = _all_rows(model, rows)
-    ptr, inc_row, _, inc_upper = model.incoming()
-    bad, r, _ = prune_kernel(
-        np.asarray(removed, dtype=bool),
-        r,
-        model.row_state,
-        model.state_ptr,
-        model.row_ptr,
-        model.successor,
-        model.upper,
-        ptr,
-        inc_row,
-        inc_upper,
-        np.zeros(model.n_states, dtype=bool),
-    )
-    return SubModel(~bad, r, actions_from_rows(model, r))
+    gone, kept = pruned_rows(model, removed, rows)
+    return SubModel(~gone, kept, actions_from_rows(model, kept))
