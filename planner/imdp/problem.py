@@ -208,9 +208,10 @@ class Solution:
             maximal problem; of a minimal one, its dual's, which gives ``lower``) counts
             only once shown superharmonic in exact arithmetic
             (:func:`planner.imdp.certify.verify_upper`); where it was not, the solution
-            is not ``converged``, a maximal problem's ``upper`` is the iteration's bound
-            with a floating-point allowance that is not proven, and a minimal problem's
-            ``lower`` is 0 on the free states. With the uncertified mode ``upper`` is
+            is not ``converged``, a maximal problem's ``upper`` is 1 on the free states
+            and a minimal problem's ``lower`` is 0 there (the trivial bounds: the
+            iteration's own bound is checked in floating point only, which over long
+            stays can leave it below the value). With the uncertified mode ``upper`` is
             only the trivial bound (1 for reachability; for discounted reward the
             residual bound, which is sound for that property).
         strategy: ``(n_states,)`` chosen action per state (-1: none; targets, avoided

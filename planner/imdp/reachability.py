@@ -40,12 +40,13 @@ and ``converged`` is ``False``).
 **The certificate**: the accepted bound, raised by
 :func:`planner.imdp.widening.rounding_widened`, counts only once
 :func:`planner.imdp.certify.verify_upper` shows it superharmonic in exact arithmetic
-(``ReachResult.verified``); the floating-point checks above only steer. Where the raise
-would open a closed bracket (long stays: it sums an allowance along them), the bound as it
-is is checked first and kept if shown; a uniform raise is checked beside the widening's
-search for short stays, which stops once it is shown, and for an open bracket before that
-search, which then runs only where the raise is not shown
-(:func:`planner.imdp.widening.certified_upper`).
+(``ReachResult.verified``; where it is not, ``upper`` is 1 on the free states): the
+floating-point checks above only steer, and over long stays they may keep a bound below
+the value (docs/design.md). Where the raise would open a closed bracket (long stays: it
+sums an allowance along them), the bound as it is is checked first and kept if shown; a
+uniform raise is checked beside the widening's search for short stays, which stops once
+it is shown, and for an open bracket before that search, which then runs only where the
+raise is not shown (:func:`planner.imdp.widening.certified_upper`).
 
 **Creeping** (maximal reachability): after 16, 32, 64, ... sweeps the states still moving,
 if few, are solved by strategy iteration with the others held; else, if the residuals
@@ -433,7 +434,8 @@ def reach_values(
 
     When the bracket closed but the rounding widening then opened it again (at tolerances
     near ``1e-12``, where the widening of long stays is a sizeable part of the tolerance),
-    the solve runs once more to ``_RETRY_FRACTION`` of the tolerance."""
+    the solve runs once more to ``_RETRY_FRACTION`` of the tolerance (a shown bound kept
+    first, then the narrower)."""
     if free_rows.size == 0:
         v = fixed_val.copy()
         return ReachResult(v, v.copy(), 0.0, 0, None, 0, np.zeros(0), 0, verified=True)
@@ -445,12 +447,15 @@ def reach_values(
     result, closed = solved(alg, sweeper)
     if closed and _width(result) >= alg.tolerance:
         again, _ = solved(replace(alg, tolerance=alg.tolerance * _RETRY_FRACTION))
-        kept = again if _width(again) < _width(result) else result
+        kept = min((result, again), key=lambda r: (not r.verified, _width(r)))
         # the counts are of both solves, whichever is kept
         kept.iterations = result.iterations + again.iterations
         kept.evaluations = result.evaluations + again.evaluations
         kept.upper_sweeps = result.upper_sweeps + again.upper_sweeps
         result = kept
+    if alg.certified and not result.verified:
+        result.upper = result.upper.copy()
+        result.upper[m.row_state[free_rows]] = 1.0
     return result
 
 

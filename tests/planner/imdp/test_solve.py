@@ -594,6 +594,34 @@ def _solved_random(rng: np.random.Generator, count: int) -> list:
     return out
 
 
+@pytest.mark.parametrize("sat", ["pessimistic", "optimistic"])
+def test_an_upper_bound_not_shown_is_the_trivial_one(monkeypatch, sat):
+    # where the exact check does not show the bound from above, the iteration's bound
+    # (only checked in floating point, which over long stays can leave it below the value)
+    # is no bound: the solution reports 1 on the free states, is not converged, and keeps
+    # the bound from below and the settled states of the shown solve
+    rng = np.random.default_rng(11)
+    models = [random_imdp(rng, 60, 3, 5) for _ in range(4)]
+    spec = Specification(ReachAvoid("goal", "bad"), sat)
+    shown = [solve(Problem(m, spec)) for m in models]
+    certified = widening.certified_upper
+    refused = []
+
+    def refusing(*args):
+        refused.append(certified(*args)[0])
+        return False, certified(*args)[1]
+
+    monkeypatch.setattr(solve_module, "certified_upper", refusing)
+    for m, first in zip(models, shown, strict=True):
+        count = len(refused)
+        sol = solve(Problem(m, spec))
+        free = ~sol.fixed
+        assert first.converged and len(refused) > count and all(refused[count:])
+        assert not sol.converged and free.any() and np.all(sol.upper[free] == 1.0)
+        np.testing.assert_array_equal(sol.upper[~free], first.upper[~free])
+        np.testing.assert_array_equal(sol.lower, first.lower)
+
+
 def test_a_large_model_widens_along_the_greedy_rows_unless_they_stay_too_long(monkeypatch):
     # beyond SI_MAX_STATES free states (here: any) the widening first takes the rows
     # greedy for the bound from above: on random models they leave soon, and no search
