@@ -127,7 +127,11 @@ pace halving it takes hundreds of rounds). On the 100 x 100 benchmark grid (seed
 the same certificates and closed brackets, all 81 solves 76.3-77.6 s instead of 79.7 s
 (seed 0: its width stays at 4.73e-8 from round 88, and the repair comes at round 96
 instead of 112); checked every 4 rounds at any width, the flat first rounds (width 1)
-ended windows before the bound from below had risen, and 40 brackets stayed open."""
+ended windows before the bound from below had risen, and 40 brackets stayed open. Such a
+window goes to its repair even where the width halved since the last window's end: the
+halving came before the flat rounds (seed 0: the width fell to 4.7e-8 at round 82 and
+stayed; the repair came at round 88 instead of 92, 179 sweeps instead of 187; seeds 1-40
+the same sweeps, passes and bounds)."""
 
 _II_REPAIRS = 3
 """Strategy-iteration repairs of a stalled interval iteration."""
@@ -350,7 +354,7 @@ class _IntervalIteration:
                 and width > (1.0 - _NARROWING) * last_width
             )
             v0, last_wide, last_width = self.v.copy(), n_wide, width
-            if width <= 0.5 * checkpoint:
+            if width <= 0.5 * checkpoint and not flat:
                 checkpoint = width
                 continue
             many = n_wide > LOCAL_FRACTION * st.size

@@ -318,6 +318,28 @@ def test_a_flat_width_near_the_tolerance_ends_its_window_early(monkeypatch, widt
     assert repairs[0] == first_repair
 
 
+def test_flat_rounds_end_their_window_in_a_repair_after_an_earlier_halving(monkeypatch):
+    # the width halved since the last window's end (1e-6 to 1e-7) and then stays at 4e-8,
+    # within 100 times the tolerance: the first check that finds it flat (round 24) ends
+    # the window with a repair; the halving before the flat rounds is no progress now
+    ii, repairs, interval = _scripted_iteration(monkeypatch, 1000, [])
+    widths = {**dict.fromkeys(range(1, 17), 1e-6), 17: 1e-7, 18: 1e-7}
+
+    def scripted_round(self):
+        self.it += 1
+        self.sweeps += 2
+        width = widths.get(self.it, 4e-8)
+        monkeypatch.setattr(interval._IntervalIteration, "width", lambda self: width)
+        return width
+
+    wide = np.zeros(1000, dtype=bool)
+    wide[:10] = True
+    monkeypatch.setattr(interval._IntervalIteration, "round", scripted_round)
+    monkeypatch.setattr(interval._IntervalIteration, "_window", lambda self, v0: (wide, 0))
+    assert not ii.run()
+    assert repairs[0] == 6 * interval._FLAT_ROUNDS
+
+
 @pytest.mark.parametrize(
     "progress",
     ["none", "catching", "thinning", "narrowing", "few states"],
