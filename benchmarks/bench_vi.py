@@ -371,7 +371,8 @@ def side_by_side(name, model, path_formula, solve_fast, t_fast, solve_cert, firs
         f"{t_fast:.2f} s ({t_storm / t_fast:.1f}x) and certified {t_cert:.2f} s "
         f"({t_storm / t_cert:.1f}x), each the least of {SIDE_RUNS} runs in turns; max "
         f"|Storm - hopnav| = "
-        f"{diff:.1e}; Storm outside the certified bracket (width {cert.error:.1e}) at "
+        f"{diff:.1e}; Storm outside hopnav's bracket (width {cert.error:.1e}, certified "
+        f"{cert.converged}) at "
         f"{int((off > 0).sum())} states, by up to {max(float(off.max()), 0.0):.1e}"
     )
 
