@@ -82,6 +82,7 @@ class DecoupledIMDP:
         self.initial = np.unique(np.asarray(list(initial), dtype=np.int64))
         self.action_names = tuple(action_names or (f"a{i}" for i in range(self.n_actions)))
         self._prepare()
+        self._expanded = None  # reach.expanded_imdp's result, built once
 
     def _check_rows(self) -> None:
         """Rows sorted by state then action, indices in range, a map for every row."""

@@ -150,9 +150,11 @@ class DecoupledProduct:
         out = settled_values(self.model, free, sol.lower, sol.lower, pessimistic)
         if out is not None:
             x, x_low = out
-            certified = certify_candidate(
-                self.model, free, np.maximum(sol.lower, x_low), sol, pessimistic, alg, x
-            )
+            # the strategy's lowered values bound from below, whether or not its candidate
+            # from above is shown
+            low = np.maximum(sol.lower, x_low)
+            sol = replace(sol, values=low, lower=low)
+            certified = certify_candidate(self.model, free, low, sol, pessimistic, alg, x)
             if certified is not None:
                 certified = rounding_widened(self.model, certified, pessimistic, alg.tolerance)
                 if certified.converged:

@@ -1,6 +1,7 @@
 """Reachability on a decoupled model: Gauss-Seidel sweeps with the exact operator from
-below, certified from above (a candidate checked superharmonic), strategy iteration, and the
-expanded interval MDP with the same values."""
+below, bounded from above (a candidate checked superharmonic in floating point, then shown
+in exact arithmetic through the expanded interval MDP, :func:`shown_bracket`), strategy
+iteration, and the expanded interval MDP with the same values."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import scipy.sparse as sp
 
+from planner.imdp.certify import verify_upper
 from planner.imdp.decoupled import operator
 from planner.imdp.decoupled.model import DecoupledIMDP
 from planner.imdp.evaluate import chain_reach
@@ -117,7 +119,7 @@ def solve_reach(
         if alg.certified
         else bool(residual < alg.tolerance)
     )
-    return Solution(
+    sol = Solution(
         values=v,
         strategy=strategy,
         residual=residual,
@@ -129,6 +131,44 @@ def solve_reach(
         upper_sweeps=passes,
         _q=lambda: q,
     )
+    return shown_bracket(m, sol, pessimistic, alg.tolerance) if alg.certified else sol
+
+
+SHOWN_MAX_ENTRIES = 2_000_000
+"""Entries of :func:`expanded_imdp` up to which :func:`shown_bracket` builds it for the exact
+check; beyond, no bound from above is shown."""
+
+
+def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: float) -> Solution:
+    """``sol`` with a bound from above that counts: ``sol.upper`` shown superharmonic in
+    exact arithmetic (:func:`planner.imdp.certify.verify_upper`, raised where it raises)
+    on :func:`expanded_imdp`, whose values on the model's states are the model's, each
+    auxiliary state valued at its distribution's expectation of the bound; converged only
+    where that bound closes the bracket. Where it is not shown (or the expansion would
+    have more than ``SHOWN_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the
+    solution is not converged: the checks of the sweeps from above are made in floating
+    point, and over long stays they pass bounds below the value (a slow exit of ``2^-50``
+    a step to a trap: ``[0, 5e-9]`` for ``1/8``)."""
+    free = ~sol.fixed
+    if not free.any():
+        return sol
+    if expanded_size(model) <= SHOWN_MAX_ENTRIES:
+        big, n = expanded_imdp(model)
+        x = np.empty(big.n_states)
+        x[:n] = sol.upper
+        aux = big.row_state[big.entry_row] >= n  # the auxiliary states' point distributions
+        w = np.bincount(
+            big.row_state[big.entry_row[aux]] - n,
+            big.lower[aux] * x[big.successor[aux]],
+            minlength=big.n_states - n,
+        )
+        x[n:] = w
+        checked = np.concatenate([free, np.ones(big.n_states - n, dtype=bool)])
+        shown, out = verify_upper(big, np.flatnonzero(checked[big.row_state]), x, True, pessimistic)
+        if shown:
+            upper = np.where(free, out[:n], sol.upper)
+            return replace(sol, upper=upper, converged=bool(np.max(upper - sol.lower) < tol))
+    return replace(sol, upper=np.where(free, 1.0, sol.upper), converged=False)
 
 
 def rounding_widened(
@@ -184,7 +224,7 @@ def certify_candidate(
     u, _ = _checked_candidate(m, np.sort(states), base, alg.tolerance, pessimistic, 16, True)
     if u is None:
         return None
-    return Solution(
+    checked = Solution(
         values=lower,
         strategy=sol.strategy,
         residual=sol.residual,
@@ -196,6 +236,7 @@ def certify_candidate(
         upper=u,
         upper_sweeps=sol.upper_sweeps,
     )
+    return shown_bracket(m, checked, pessimistic, alg.tolerance)
 
 
 def _checked_candidate(
@@ -259,58 +300,62 @@ def expanded_imdp(model: DecoupledIMDP) -> tuple[IMDP, int]:
     pair's product distribution (point intervals). The adversary's choice of weights is a
     choice among the vertex pairs (randomisation does not change reachability values), so
     the values on the first ``n_states`` states are the decoupled model's. Returns
-    ``(model, n_states)``; the auxiliary states carry no labels."""
+    ``(model, n_states)``; the auxiliary states carry no labels. Built once per model
+    (kept on it: the exact check of its brackets and the fallback solve both use it)."""
+    if model._expanded is not None:
+        return model._expanded
     m = model
     (xp, xb, xl, xu), (yp, yb, yl, yu) = m.axes
     rows = np.arange(m.n_rows, dtype=np.int64)
     xv_ptr, xv = operator.vertices(xp, xl, xu, rows, m.tolerance)
     yv_ptr, yv = operator.vertices(yp, yl, yu, rows, m.tolerance)
     n = m.n_states
-    s_out, a_out, t_out, p_out = [], [], [], []
-    aux = n
-    for r in range(m.n_rows):
-        bx, by = xb[xp[r] : xp[r + 1]], yb[yp[r] : yp[r + 1]]
-        vx = xv[xv_ptr[r] : xv_ptr[r + 1]].reshape(-1, bx.size)
-        vy = yv[yv_ptr[r] : yv_ptr[r + 1]].reshape(-1, by.size)
-        succ = m.maps[m.row_map[r]][np.ix_(bx, by)].ravel()
-        uniq, inv = np.unique(succ, return_inverse=True)
-        k = vx.shape[0] * vy.shape[0]
-        joint = (vx[:, None, :, None] * vy[None, :, None, :]).reshape(k, -1)
-        dist = np.zeros((k, uniq.size))
-        np.add.at(dist, (slice(None), inv), joint)
-        ids = np.arange(aux, aux + k)
-        aux += k
-        s_out.append(np.full(k, m.row_state[r]))
-        a_out.append(np.full(k, m.row_action[r]))
-        t_out.append(ids)
-        p_out.append(None)
-        for j in range(k):
-            keep = dist[j] > 0
-            s_out.append(np.full(keep.sum(), ids[j]))
-            a_out.append(np.zeros(keep.sum(), dtype=np.int64))
-            t_out.append(uniq[keep])
-            p_out.append(dist[j][keep])
-    lo = np.concatenate(
-        [np.zeros(t.size) if p is None else p for t, p in zip(t_out, p_out, strict=True)]
-    )
-    up = np.concatenate(
-        [np.ones(t.size) if p is None else p for t, p in zip(t_out, p_out, strict=True)]
-    )
-    labels = np.zeros((aux, len(m.propositions)), dtype=bool)
-    labels[:n] = m.label_matrix
+    nbx, nby = np.diff(xp), np.diff(yp)
+    kx, ky = np.diff(xv_ptr) // nbx, np.diff(yv_ptr) // nby
+    # one auxiliary state per row and vertex pair (i, j), numbered from n in row order
+    k = kx * ky
+    aux_row = np.repeat(rows, k)
+    pair = np.arange(aux_row.size) - np.repeat(np.cumsum(k) - k, k)
+    ai, aj = pair // ky[aux_row], pair % ky[aux_row]
+    # its entries: bin pairs (a, b) of the row, the product of the two vertices' masses
+    size = (nbx * nby)[aux_row]
+    e_aux = np.repeat(np.arange(aux_row.size), size)
+    t = np.arange(e_aux.size) - np.repeat(np.cumsum(size) - size, size)
+    r = aux_row[e_aux]
+    a, b = t // nby[r], t % nby[r]
+    prob = xv[xv_ptr[r] + ai[e_aux] * nbx[r] + a] * yv[yv_ptr[r] + aj[e_aux] * nby[r] + b]
+    succ = m.maps[m.row_map[r], xb[xp[r] + a], yb[yp[r] + b]]
+    # bin pairs that land on the same state merged, in their order; zero masses dropped
+    order = np.lexsort((succ, e_aux))
+    e_aux, succ, prob = e_aux[order], succ[order], prob[order]
+    starts = np.r_[True, (np.diff(e_aux) != 0) | (np.diff(succ) != 0)]
+    first = np.flatnonzero(starts)
+    mass = np.zeros(first.size)
+    np.add.at(mass, np.cumsum(starts) - 1, prob)  # summed in order, as the entries come
+    keep = mass > 0
+    src, dst, mass = e_aux[first][keep] + n, succ[first][keep], mass[keep]
+    aux = n + aux_row.size
+    state = np.concatenate([m.row_state[aux_row], src])
+    action = np.concatenate([m.row_action[aux_row], np.zeros(src.size, dtype=np.int64)])
+    target = np.concatenate([n + np.arange(aux_row.size), dst])
+    lo = np.concatenate([np.zeros(aux_row.size), mass])
+    up = np.concatenate([np.ones(aux_row.size), mass])
+    names = np.array(m.propositions)
+    labels = [tuple(names[row]) for row in m.label_matrix] + [()] * (aux - n)
     out = IMDP(
         aux,
-        np.concatenate(s_out),
-        np.concatenate(a_out),
-        np.concatenate(t_out),
+        state,
+        action,
+        target,
         lo,
         up,
         n_actions=m.n_actions,
-        labels=[tuple(np.array(m.propositions)[row]) for row in labels],
+        labels=labels,
         propositions=m.propositions,
         initial=m.initial,
         tolerance=max(m.tolerance, 1e-12),
     )
+    model._expanded = (out, n)
     return out, n
 
 

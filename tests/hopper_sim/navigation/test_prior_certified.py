@@ -1,7 +1,10 @@
 """The first synthesis of every shipped scenario (the prior landing-error model, no data):
-the worst-case bracket closes at the default settings, for the runner's product-interval
-abstraction and for the decoupled one built from the same bounds, and is certified where
-its bound from above is shown superharmonic in exact arithmetic.
+the worst-case bracket of the runner's product-interval abstraction closes at the default
+settings and is certified, its bound from above shown superharmonic in exact arithmetic.
+The decoupled abstraction built from the same bounds closes its bracket in floating point,
+but the exact check (through its expansion) does not show that bound on any of the four
+priors, so it reports the trivial bound from above (before stop 55 it reported the
+unshown one as certified).
 
 On scenarios b and d the prior's intervals have zero lower bounds almost everywhere and tiny
 forced ones (1e-11 .. 1e-7), so the values from below are ~1e-38 and move by ~1e-11 per
@@ -44,13 +47,14 @@ def test_prior_abstraction_is_certified(name, product_shown):
     )
     for sol, initial, shown in (
         (satisfaction(product), product.initial, product_shown),
-        (decoupled.satisfaction(), decoupled.initial, True),
+        (decoupled.satisfaction(), decoupled.initial, False),
     ):
         assert sol.converged == shown
-        assert sol.error < 1e-8
         assert np.all(sol.lower <= sol.upper)
         # no data: nothing is guaranteed at the start
-        assert sol.upper[initial] < 1e-8
+        assert sol.lower[initial] < 1e-8
+        if shown:
+            assert sol.error < 1e-8 and sol.upper[initial] < 1e-8
 
 
 def test_few_hops_of_data_keep_both_brackets_ordered():

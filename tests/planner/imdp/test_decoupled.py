@@ -243,3 +243,62 @@ def test_axis_rows_get_the_exact_support_of_interval_rows():
     assert yu[2] == 0.0 and yl[1] == 1.0
     last = slice(yp[2], yp[3])
     assert sum(map(Fraction, yu[last].tolist())) >= 1 >= sum(map(Fraction, yl[last].tolist()))
+
+
+@pytest.mark.parametrize("pessimistic", [True, False])
+def test_a_slow_exit_is_not_certified_from_floating_point_checks(pessimistic):
+    # state 2 stays with (1 - 7q)(1 - q), q = 2^-50, leaves for the goal with 7q and for
+    # the trap with (1 - 7q) q (one axis each), or goes to the goal at once: the maximal
+    # probability of the trap, avoiding the goal, is about 1/8 (action 0 for ever). The
+    # sweeps' floating-point checks passed the bound 5e-9 and the solve said converged;
+    # the exact check through the expansion refuses it, and the bound from above is 1
+    q = 2.0**-50
+    ex, ey = 7 * q, q
+    x_p = np.array([1.0, 1.0, 1 - ex, ex, 1.0])
+    y_p = np.array([1.0, 1.0, 1 - ey, ey, 1.0])
+    ptr = np.array([0, 1, 2, 4, 5])
+    # map 0 for the absorbing rows (bins (0, 0) and (1, 1)), map 1 for state 2's rows
+    maps = np.array([[[0, 0], [0, 1]], [[2, 1], [0, 0]]])
+    m = DecoupledIMDP(
+        3,
+        np.array([0, 1, 2, 2]),
+        np.array([0, 0, 0, 1]),
+        ptr,
+        np.array([0, 1, 0, 1, 1]),
+        x_p,
+        x_p,
+        ptr,
+        np.array([0, 1, 0, 1, 0]),
+        y_p,
+        y_p,
+        maps,
+        np.array([0, 0, 1, 1]),
+        n_actions=2,
+        labels=[("goal",), ("bad",), ()],
+    )
+    sol = solve_reach(
+        m, np.array([False, True, False]), np.array([True, False, False]), pessimistic
+    )
+    exact = Fraction(1 - ex) * Fraction(ey) / (Fraction(ex) + Fraction(1 - ex) * Fraction(ey))
+    assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
+    assert not sol.converged and sol.upper[2] == 1.0
+
+
+@pytest.mark.parametrize("pessimistic", [True, False])
+def test_the_expansion_has_the_decoupled_values(pessimistic):
+    # the expanded interval MDP (one auxiliary state per pair of per-axis vertices, built
+    # by array operations) has the decoupled model's values on its first states, against
+    # the enumeration of every vertex pair; built once per model
+    from planner.imdp import Problem, ReachAvoid, Specification, solve
+    from planner.imdp.decoupled.reach import expanded_imdp
+
+    rng = np.random.default_rng(21 if pessimistic else 22)
+    for _ in range(8):
+        m = random_decoupled(rng, n=int(rng.integers(3, 7)), nxb=int(rng.integers(2, 4)), nyb=3)
+        big, n = expanded_imdp(m)
+        assert expanded_imdp(m)[0] is big and n == m.n_states
+        goal = np.zeros(big.n_states, dtype=bool)
+        goal[:n] = m.states_labelled("goal")
+        spec = Specification(ReachAvoid(goal), "pessimistic" if pessimistic else "optimistic")
+        sol = solve(Problem(big, spec), ValueIteration(1e-11))
+        assert sol.values[:n] == pytest.approx(brute_force_reach(m, pessimistic), abs=1e-9)
