@@ -148,7 +148,10 @@ def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: f
     have more than ``SHOWN_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the
     solution is not converged: the checks of the sweeps from above are made in floating
     point, and over long stays they pass bounds below the value (a slow exit of ``2^-50``
-    a step to a trap: ``[0, 5e-9]`` for ``1/8``)."""
+    a step to a trap: ``[0, 5e-9]`` for ``1/8``). The proof is for the expansion, whose
+    point masses are the vertex products rounded to the nearest double: the model's own
+    values may differ from its in the last bits (on the grid cases of the tests its bound
+    from below exceeds the shown bound by up to 6.7e-16 at some states)."""
     free = ~sol.fixed
     if not free.any():
         return sol
