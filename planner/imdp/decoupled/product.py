@@ -11,8 +11,8 @@ from planner.errors import ProductError
 from planner.imdp.decoupled.model import DecoupledIMDP
 from planner.imdp.decoupled.reach import (
     certify_candidate,
+    expandable,
     expanded_imdp,
-    expanded_size,
     rounding_widened,
     settled_values,
     solve_reach,
@@ -129,8 +129,8 @@ class DecoupledProduct:
         they can creep where mass leaks slowly), by strategy iteration on the exact operator
         (its lowered values the lower bound, a checked candidate from its values the upper),
         else on :func:`expanded_imdp` by :func:`planner.imdp.solve.solve` (at most
-        ``_EXPANDED_SWEEPS`` sweeps) when the expansion has at most ``_EXPAND_MAX_ENTRIES``
-        entries; otherwise the direct bracket, open."""
+        ``_EXPANDED_SWEEPS`` sweeps) when the expansion is built (:func:`expandable`);
+        otherwise the direct bracket, open."""
         pessimistic = Adversary(adversary) == Adversary.PESSIMISTIC
         target = self.accepting_sink()
         alg = ValueIteration() if algorithm is None else algorithm
@@ -159,7 +159,7 @@ class DecoupledProduct:
                 certified = rounding_widened(self.model, certified, pessimistic, alg.tolerance)
                 if certified.converged:
                     return certified
-        if expanded_size(self.model) > _EXPAND_MAX_ENTRIES:
+        if not expandable(self.model):
             return sol
         big, n = expanded_imdp(self.model)
         spec = Specification(
@@ -188,10 +188,6 @@ class DecoupledProduct:
 
 _EXPAND_MAX_ROWS = 20_000
 """Rows up to which an uncertified decoupled solve falls back to the expanded model."""
-
-_EXPAND_MAX_ENTRIES = 2_000_000
-"""Entries of the expanded model (vertex pairs times their supports) up to which it is
-built; beyond, the direct solve's (sound, possibly wide) bracket is returned."""
 
 _EXPANDED_SWEEPS = 5_000
 """Sweeps of the solve on the expanded model (interval iteration's rounds included)."""

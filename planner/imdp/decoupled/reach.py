@@ -134,9 +134,16 @@ def solve_reach(
     return shown_bracket(m, sol, pessimistic, alg.tolerance) if alg.certified else sol
 
 
-SHOWN_MAX_ENTRIES = 2_000_000
-"""Entries of :func:`expanded_imdp` up to which :func:`shown_bracket` builds it for the exact
-check; beyond, no bound from above is shown."""
+EXPAND_MAX_ENTRIES = 2_000_000
+"""Entries of :func:`expanded_imdp` (vertex pairs times their supports) up to which it is
+built: for the exact check of :func:`shown_bracket` and for the fallback solve of
+:meth:`DecoupledProduct.satisfaction <planner.imdp.decoupled.DecoupledProduct.satisfaction>`;
+beyond, no bound from above is shown and the direct solve's bracket is returned."""
+
+
+def expandable(model: DecoupledIMDP) -> bool:
+    """Whether :func:`expanded_imdp` is built already or within ``EXPAND_MAX_ENTRIES``."""
+    return model._expanded is not None or expanded_size(model) <= EXPAND_MAX_ENTRIES
 
 
 def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: float) -> Solution:
@@ -145,7 +152,7 @@ def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: f
     on :func:`expanded_imdp`, whose values on the model's states are the model's, each
     auxiliary state valued at its distribution's expectation of the bound; converged only
     where that bound closes the bracket. Where it is not shown (or the expansion would
-    have more than ``SHOWN_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the
+    have more than ``EXPAND_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the
     solution is not converged: the checks of the sweeps from above are made in floating
     point, and over long stays they pass bounds below the value (a slow exit of ``2^-50``
     a step to a trap: ``[0, 5e-9]`` for ``1/8``). The proof is for the expansion, whose
@@ -155,17 +162,15 @@ def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: f
     free = ~sol.fixed
     if not free.any():
         return sol
-    if expanded_size(model) <= SHOWN_MAX_ENTRIES:
+    if expandable(model):
         big, n = expanded_imdp(model)
         x = np.empty(big.n_states)
         x[:n] = sol.upper
-        aux = big.row_state[big.entry_row] >= n  # the auxiliary states' point distributions
-        w = np.bincount(
-            big.row_state[big.entry_row[aux]] - n,
-            big.lower[aux] * x[big.successor[aux]],
-            minlength=big.n_states - n,
+        owner = big.row_state[big.entry_row]
+        aux = owner >= n  # the auxiliary states' point distributions
+        x[n:] = np.bincount(
+            owner[aux] - n, big.lower[aux] * x[big.successor[aux]], minlength=big.n_states - n
         )
-        x[n:] = w
         checked = np.concatenate([free, np.ones(big.n_states - n, dtype=bool)])
         shown, out = verify_upper(big, np.flatnonzero(checked[big.row_state]), x, True, pessimistic)
         if shown:
