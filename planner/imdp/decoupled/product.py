@@ -13,7 +13,6 @@ from planner.imdp.decoupled.reach import (
     certify_candidate,
     expandable,
     expanded_imdp,
-    rounding_widened,
     settled_values,
     solve_reach,
 )
@@ -138,12 +137,7 @@ class DecoupledProduct:
         direct = (
             replace(alg, max_iterations=min(alg.max_iterations, _DIRECT_SWEEPS)) if small else alg
         )
-        sol = rounding_widened(
-            self.model,
-            solve_reach(self.model, target, None, pessimistic, direct),
-            pessimistic,
-            alg.tolerance,
-        )
+        sol = solve_reach(self.model, target, None, pessimistic, direct)
         if sol.converged or not small:
             return sol
         free = np.flatnonzero(~sol.fixed)
@@ -155,10 +149,8 @@ class DecoupledProduct:
             low = np.maximum(sol.lower, x_low)
             sol = replace(sol, values=low, lower=low)
             certified = certify_candidate(self.model, free, low, sol, pessimistic, alg, x)
-            if certified is not None:
-                certified = rounding_widened(self.model, certified, pessimistic, alg.tolerance)
-                if certified.converged:
-                    return certified
+            if certified is not None and certified.converged:
+                return certified
         if not expandable(self.model):
             return sol
         big, n = expanded_imdp(self.model)

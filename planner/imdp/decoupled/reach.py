@@ -147,50 +147,79 @@ def expandable(model: DecoupledIMDP) -> bool:
 
 
 def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: float) -> Solution:
-    """``sol`` with a bound from above that counts: ``sol.upper`` shown superharmonic in
-    exact arithmetic (:func:`planner.imdp.certify.verify_upper`, raised where it raises)
-    on :func:`expanded_imdp`, whose values on the model's states are the model's, each
+    """``sol`` with a bound from above that counts: shown superharmonic in exact arithmetic
+    (:func:`planner.imdp.certify.verify_upper`, raised where it raises) on
+    :func:`expanded_imdp`, whose values on the model's states are the model's, each
     auxiliary state valued at its distribution's expectation of the bound; converged only
-    where that bound closes the bracket. Where it is not shown (or the expansion would
-    have more than ``EXPAND_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the
-    solution is not converged: the checks of the sweeps from above are made in floating
-    point, and over long stays they pass bounds below the value (a slow exit of ``2^-50``
-    a step to a trap: ``[0, 5e-9]`` for ``1/8``). The proof is for the expansion, whose
-    point masses are the vertex products rounded to the nearest double: the model's own
-    values may differ from its in the last bits (on the grid cases of the tests its bound
-    from below exceeds the shown bound by up to 6.7e-16 at some states)."""
+    where that bound closes the bracket. As for interval MDPs
+    (:func:`planner.imdp.widening.certified_upper`), the bound checked is ``sol.upper``
+    raised by the floating-point allowance of :func:`_rounding_raise` (a raise that lets
+    the exact check pass sooner, no proof); where that raise would open a closed bracket
+    (long stays), ``sol.upper`` as it is is checked first and kept if shown within the
+    tolerance. Where no bound is shown (or the expansion would have more than
+    ``EXPAND_MAX_ENTRIES`` entries) ``upper`` is 1 on the free states and the solution is
+    not converged: the checks of the sweeps from above are made in floating point, and
+    over long stays they pass bounds below the value (a slow exit of ``2^-50`` a step to a
+    trap: ``[0, 5e-9]`` for ``1/8``). A shown bound is reported at least ``sol.lower``
+    (any number above an upper bound is one): the proof is for the expansion, whose point
+    masses are the vertex products rounded to the nearest double, so the model's own
+    values, and its bound from below, may differ from the expansion's in the last bits (on
+    the grid cases of the tests the bound from below exceeded the shown bound by up to
+    6.7e-16 at some states)."""
     free = ~sol.fixed
     if not free.any():
         return sol
     if expandable(model):
-        big, n = expanded_imdp(model)
-        x = np.empty(big.n_states)
-        x[:n] = sol.upper
-        owner = big.row_state[big.entry_row]
-        aux = owner >= n  # the auxiliary states' point distributions
-        x[n:] = np.bincount(
-            owner[aux] - n, big.lower[aux] * x[big.successor[aux]], minlength=big.n_states - n
-        )
-        checked = np.concatenate([free, np.ones(big.n_states - n, dtype=bool)])
-        shown, out = verify_upper(big, np.flatnonzero(checked[big.row_state]), x, True, pessimistic)
-        if shown:
-            upper = np.where(free, out[:n], sol.upper)
-            return replace(sol, upper=upper, converged=bool(np.max(upper - sol.lower) < tol))
+        closed = bool(np.max(sol.upper - sol.lower, initial=0.0) < tol)
+        raised = _rounding_raise(model, sol, pessimistic, tol) if closed else sol.upper
+        tries = [raised]
+        if closed and np.max(raised - sol.lower, initial=0.0) >= tol:
+            tries.insert(0, sol.upper)
+        kept = None
+        for u in tries:
+            shown, out = _verify_on_expansion(model, u, free, pessimistic)
+            if shown:
+                upper = np.where(free, np.maximum(out, sol.lower), sol.upper)
+                width = float(np.max(upper - sol.lower, initial=0.0))
+                if kept is None or width < kept[1]:
+                    kept = (upper, width)
+                if width < tol:
+                    break
+        if kept is not None:
+            return replace(sol, upper=kept[0], converged=kept[1] < tol)
     return replace(sol, upper=np.where(free, 1.0, sol.upper), converged=False)
 
 
-def rounding_widened(
+def _verify_on_expansion(
+    model: DecoupledIMDP, u: np.ndarray, free: np.ndarray, pessimistic: bool
+) -> tuple[bool, np.ndarray]:
+    """``(shown, U')`` of :func:`planner.imdp.certify.verify_upper` for the bound ``u`` on
+    the model's states, checked at the ``free`` ones on :func:`expanded_imdp` (each
+    auxiliary state valued at its point distribution's expectation of ``u``); ``U'`` on
+    the model's states."""
+    big, n = expanded_imdp(model)
+    x = np.empty(big.n_states)
+    x[:n] = u
+    owner = big.row_state[big.entry_row]
+    aux = owner >= n  # the auxiliary states' point distributions
+    x[n:] = np.bincount(
+        owner[aux] - n, big.lower[aux] * x[big.successor[aux]], minlength=big.n_states - n
+    )
+    checked = np.concatenate([free, np.ones(big.n_states - n, dtype=bool)])
+    shown, out = verify_upper(big, np.flatnonzero(checked[big.row_state]), x, True, pessimistic)
+    return shown, out[:n]
+
+
+def _rounding_raise(
     model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: float
-) -> Solution:
-    """``sol`` with its upper bound widened by what floating point may have hidden from its
-    certificate (the checks accept ``T(U) <= U + 1e-15``; every row evaluation is rounded):
-    the allowance summed over the expected stay of the strategy of shortest stay among the
-    rows within ``U - L`` of the best at ``U``, each with the adversary's distribution at
-    ``U`` (:func:`planner.imdp.stay.chain_stay_allowance`, as
-    :func:`planner.imdp.widening.rounding_widened` for interval MDPs); converged only
-    if the bracket still closes. Unconverged solutions are returned as they are."""
-    if not sol.converged:
-        return sol
+) -> np.ndarray:
+    """``sol.upper`` raised by what floating point may have hidden from its checks (they
+    accept ``T(U) <= U + 1e-15``; every row evaluation is rounded): the allowance summed
+    over the expected stay of the strategy of shortest stay among the rows within
+    ``U - L`` of the best at ``U``, each with the adversary's distribution at ``U``
+    (:func:`planner.imdp.stay.chain_stay_allowance`, as
+    :func:`planner.imdp.widening.rounding_widened` for interval MDPs; the search for that
+    strategy bounded by the room ``tol`` leaves), at most 1."""
     m = model
     upper, lower = sol.upper, sol.lower
     free = ~sol.fixed
@@ -201,7 +230,7 @@ def rounding_widened(
     slack = np.maximum(upper - lower, 0.0)[rs] + ROUNDING
     near = np.flatnonzero(free[rs] & (q >= best[rs] - slack))
     if near.size == 0:
-        return sol
+        return upper
     r, t, p = operator.chosen_distributions(near, upper, pessimistic, m.layout, m.width)
     mat = sp.csr_matrix((p, (r, t)), shape=(near.size, m.n_states))
     start = np.searchsorted(near, top[free[m.row_state[top]]])
@@ -209,8 +238,7 @@ def rounding_widened(
     limit = stay_limit(mat, upper, ROUNDING, widening_room(lower[free], upper[free], tol))
     choice, stay = shortest_stay(mat, rs[near], start, limit=limit)
     allowance = chain_stay_allowance(mat[choice], rs[near[choice]], upper, ROUNDING, stay=stay)
-    widened = np.where(free, np.minimum(1.0, upper + allowance), upper)
-    return replace(sol, upper=widened, converged=bool(np.max(widened - lower) < tol))
+    return np.where(free, np.minimum(1.0, upper + allowance), upper)
 
 
 def certify_candidate(

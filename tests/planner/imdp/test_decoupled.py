@@ -251,7 +251,8 @@ def test_a_slow_exit_is_not_certified_from_floating_point_checks(pessimistic):
     # the trap with (1 - 7q) q (one axis each), or goes to the goal at once: the maximal
     # probability of the trap, avoiding the goal, is about 1/8 (action 0 for ever). The
     # sweeps' floating-point checks passed the bound 5e-9 and the solve said converged;
-    # the exact check through the expansion refuses it, and the bound from above is 1
+    # the exact check through the expansion refuses it; what stands is a bound shown
+    # exactly (the rounding raise over the stay, or 1), the bracket open
     q = 2.0**-50
     ex, ey = 7 * q, q
     x_p = np.array([1.0, 1.0, 1 - ex, ex, 1.0])
@@ -281,7 +282,7 @@ def test_a_slow_exit_is_not_certified_from_floating_point_checks(pessimistic):
     )
     exact = Fraction(1 - ex) * Fraction(ey) / (Fraction(ex) + Fraction(1 - ex) * Fraction(ey))
     assert Fraction(sol.lower[2]) <= exact <= Fraction(sol.upper[2])
-    assert not sol.converged and sol.upper[2] == 1.0
+    assert not sol.converged and sol.upper[2] - sol.lower[2] > 0.1
 
 
 @pytest.mark.parametrize("pessimistic", [True, False])
