@@ -30,11 +30,6 @@ large arrays (:mod:`planner.allocator`: the re-synthesis rebuilds arrays above g
 32 MiB mmap threshold on every call, and faulting their pages in anew costs about a tenth
 of it); ``--system-allocator`` leaves it as it is.
 
-A fixed numpy workload (a gather of 4M from 2M doubles and a sort of 500k, least of 20) is
-timed at the start and the end (:func:`machine_probe_ms`): the same code reads 23-24 ms in
-a quiet stretch of the development machine and 30-60 ms in slow ones, which is how the
-absolute timings (the re-synthesis target) are to be read across runs.
-
 The compiled kernels (numba) are loaded from numba's cache, or compiled on a fresh
 checkout, by the first solve in a process; a small warm-up does that before the timed
 solves and its time is printed. ``--seed`` draws another hazard layout and other intervals.
@@ -168,21 +163,6 @@ def best_of(f, first: float, runs: int = 3) -> float:
     return min([first] + [timed(f)[1] for _ in range(runs - 1)])
 
 
-def machine_probe_ms(repeats: int = 20) -> float:
-    """Milliseconds of a fixed numpy workload (gather and sort), the least of
-    ``repeats``: a reading of how fast the machine runs at the moment."""
-    rng = np.random.default_rng(0)
-    a = rng.random(2_000_000)
-    idx = rng.integers(0, a.size, 4_000_000)
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        a[idx].sum()
-        np.sort(a[:500_000])
-        best = min(best, time.perf_counter() - t0)
-    return 1e3 * best
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
@@ -201,10 +181,6 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     reused = not args.system_allocator and reuse_freed_memory()
     print(f"freed large arrays reused (planner.allocator, as in the hopnav command): {reused}")
-    print(
-        f"machine probe (a fixed numpy gather and sort, least of 20): {machine_probe_ms():.1f} ms "
-        f"(23-24 ms in a quiet stretch of the development machine)"
-    )
 
     # the compiled kernels are loaded (or, on a fresh checkout, compiled) on first use in a
     # process: do that outside the timed solves and report it
@@ -221,7 +197,6 @@ def main() -> None:
         bench_grid(rng, args.full, args.storm)
     if not args.skip_random:
         bench_random(rng, args.random_states, args.storm)
-    print(f"machine probe at the end: {machine_probe_ms():.1f} ms")
 
 
 def make_grid(rng: np.random.Generator, n: int = 100) -> tuple[IMDP, GridWorld]:
