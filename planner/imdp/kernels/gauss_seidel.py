@@ -16,6 +16,7 @@ from planner.imdp.kernels.rows import (
     below,
     feasible_bound,
     scratch,
+    sort_critical,
     sorted_value,
     threshold_value,
 )
@@ -87,13 +88,15 @@ def gauss_seidel_sweep(
     and evaluate the row exactly only where it no longer skips it. A skipped row cannot
     beat or tie the best, so values and best rows are those of the sweep without skipping.
 
-    A row sorted anew (:func:`sorted_value`) is evaluated again by :func:`threshold_value`
-    at the critical successor just found, so that every row value comes from the one
-    formula compiled here: a row's value then does not depend on whether its stored
-    critical successor still stood or was found anew, so sweeps that skip rows (leaving
-    theirs stale) give the values of sweeps that do not, to the last bit (``sorted_value``
-    sums in another order, and as a function called from several kernels its compiled
-    variant depends on which was called first).
+    A row whose critical successor moved is sorted for the new one only
+    (:func:`sort_critical`, no sorted sum) and evaluated by :func:`threshold_value` there,
+    so that every row value comes from the one formula compiled here: a row's value then
+    does not depend on whether its stored critical successor still stood or was found
+    anew, so sweeps that skip rows (leaving theirs stale) give the values of sweeps that
+    do not, to the last bit. Only where that evaluation fails at the edges of rounding
+    does :func:`sorted_value` give the sorted sum (it sums in another order, and as a
+    function called from several kernels its compiled variant depends on which was called
+    first).
 
     ``light`` (``light_rows`` empty: none): the contiguous copy of one row
     per state that light sweeps read (:func:`planner.imdp.kernels.rows.gather_rows`), its
@@ -134,11 +137,12 @@ def gauss_seidel_sweep(
             # its critical successor copied back
             lq = threshold_value(j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
             if lq != lq:
-                lq = sorted_value(
-                    j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit, idx, keys
-                )
-                again = threshold_value(j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
-                lq = again if again == again else lq
+                sort_critical(j, l_ptr, l_rem, l_succ, l_gap, v, sign, l_crit, idx, keys)
+                lq = threshold_value(j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit)
+                if lq != lq:
+                    lq = sorted_value(
+                        j, l_ptr, l_rem, l_succ, l_lower, l_gap, v, sign, l_crit, idx, keys
+                    )
             crit[lrow] = row_ptr[lrow] + l_crit[j] - l_ptr[j]
         if prune and hi - lo > 1:
             # the last best row first; a row whose bound is below the best so far can
@@ -149,13 +153,12 @@ def gauss_seidel_sweep(
             else:
                 best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                 if best != best:
-                    best = sorted_value(
-                        arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                    )
-                    again = threshold_value(
-                        arg, row_ptr, remaining, succ, lower, gap, v, sign, crit
-                    )
-                    best = again if again == again else best
+                    sort_critical(arg, row_ptr, remaining, succ, gap, v, sign, crit, idx, keys)
+                    best = threshold_value(arg, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                    if best != best:
+                        best = sorted_value(
+                            arg, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                        )
             rise = rise_bound(c_now) + residual
             if has_base:
                 qbase[arg] = best - c_now
@@ -181,11 +184,12 @@ def gauss_seidel_sweep(
                             qbase[r] = q + SKIP_MARGIN - c_now
                             continue
                         bounded[r] = False
-                    q = sorted_value(
-                        r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                    )
-                    again = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-                    q = again if again == again else q
+                    sort_critical(r, row_ptr, remaining, succ, gap, v, sign, crit, idx, keys)
+                    q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                    if q != q:
+                        q = sorted_value(
+                            r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                        )
                 if has_base:
                     qbase[r] = q - c_now
                 if q > best or (q == best and r < arg):
@@ -204,13 +208,12 @@ def gauss_seidel_sweep(
                 else:
                     q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
                     if q != q:
-                        q = sorted_value(
-                            r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
-                        )
-                        again = threshold_value(
-                            r, row_ptr, remaining, succ, lower, gap, v, sign, crit
-                        )
-                        q = again if again == again else q
+                        sort_critical(r, row_ptr, remaining, succ, gap, v, sign, crit, idx, keys)
+                        q = threshold_value(r, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+                        if q != q:
+                            q = sorted_value(
+                                r, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys
+                            )
                 if (q > best) if maximize else (q < best):
                     best = q
                     arg = r
@@ -256,9 +259,10 @@ def light_sweep(states, row_ptr, remaining, succ, lower, gap, crit, v, adversary
         s = states[k]
         q = threshold_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit)
         if q != q:
-            q = sorted_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
-            again = threshold_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit)
-            q = again if again == again else q
+            sort_critical(k, row_ptr, remaining, succ, gap, v, sign, crit, idx, keys)
+            q = threshold_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit)
+            if q != q:
+                q = sorted_value(k, row_ptr, remaining, succ, lower, gap, v, sign, crit, idx, keys)
         q = below(q, k, row_ptr)
         old = v[s]
         if q > old:

@@ -181,6 +181,33 @@ def sorted_value(r: int, row_ptr, remaining, succ, lower, gap, v, sign: float, c
 
 
 @numba.njit(cache=True, nogil=True)
+def sort_critical(r: int, row_ptr, remaining, succ, gap, v, sign: float, crit, idx, keys) -> None:
+    """Row ``r``'s critical entry into ``crit[r]`` by sorting it, the one
+    :func:`sorted_value` records, without summing the row: for kernels that evaluate the
+    row by :func:`threshold_value` at that entry next (and by ``sorted_value`` only where
+    that fails at the edges of rounding), one pass over the row and the sorted sum fewer
+    per sorted row (on the random 100k-state benchmark model the early full sweeps, which
+    sort most rows, took 4-14 % less). Taking the entries in order one least key at a
+    time, until the remaining mass runs out, instead of the rank sort was slower there
+    (the adversary's mass runs out after about a third of the row)."""
+    a = row_ptr[r]
+    n = row_ptr[r + 1] - a
+    sort_entries(a, n, succ, v, sign, idx, keys)
+    left = remaining[r]
+    c = idx[n - 1]
+    for i in range(n):
+        e = idx[i]
+        add = gap[e] if gap[e] < left else left
+        if add < 0.0:
+            add = 0.0
+        if add < gap[e]:
+            c = e
+            break
+        left -= add
+    crit[r] = c
+
+
+@numba.njit(cache=True, nogil=True)
 def scratch(row_ptr):
     """Scratch arrays for :func:`sorted_value`: entries as many as the longest row has,
     keys twice as many (:func:`sort_entries`)."""

@@ -195,6 +195,36 @@ def test_row_value_edge_rows():
             assert got[r] == pytest.approx(ref_expectation(row, v, minimize), abs=1e-15)
 
 
+@pytest.mark.parametrize("zero_lower", [True, False])
+def test_sort_critical_records_the_critical_entry_of_the_sorted_row(zero_lower):
+    """The critical entry found without the sorted sum is the one :func:`sorted_value`
+    records, for both adversaries, on values with many ties (coarse levels: equal keys,
+    where the order among them decides) and on the edge rows (nothing left to hand out,
+    point intervals, upper bounds summing to 1)."""
+    from planner.imdp.kernels.rows import scratch, sort_critical, sorted_value
+
+    rng = np.random.default_rng(5)
+    models = [random_imdp(rng, n_states=100, max_succ=9, zero_lower=zero_lower), _edge_rows()]
+    checked = 0
+    for m in models:
+        for minimize in (True, False):
+            sw = _sweeper(m, minimize)
+            layout = (sw.row_ptr, sw.remaining, sw.succ, sw.lower, sw.gap)
+            idx, keys = scratch(sw.row_ptr)
+            sign = 1.0 if minimize else -1.0
+            for levels in (3, 1000):
+                v = rng.integers(0, levels, size=m.n_states) / (levels - 1)
+                want = np.full(sw.rows.size, -7, dtype=np.int64)
+                got = np.full(sw.rows.size, -7, dtype=np.int64)
+                for k in range(sw.rows.size):
+                    sorted_value(k, *layout, v, sign, want, idx, keys)
+                    ptr, rem, succ, _, gap = layout
+                    sort_critical(k, ptr, rem, succ, gap, v, sign, got, idx, keys)
+                    checked += 1
+                np.testing.assert_array_equal(got, want)
+    assert checked > 500
+
+
 def _naive_attractor(m: IMDP, start: np.ndarray, cand: np.ndarray) -> np.ndarray:
     x = start.copy()
     while True:
