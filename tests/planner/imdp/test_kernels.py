@@ -308,11 +308,15 @@ def _hops(m: IMDP, free: np.ndarray, sources: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("split", [False, True])
-def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split, monkeypatch):
+@pytest.mark.parametrize("wide", [False, True])
+def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split, wide, monkeypatch):
     from planner.imdp.kernels import search
 
-    # split: the two-thread scatter (large models) on a small one
+    # split: the two-thread scatter (large models) on a small one; wide: the 64-bit rows
+    # and states of models with more than 2^31 rows or states
     monkeypatch.setattr(search, "SPLIT_ENTRIES", 1 if split else 10**12)
+    if wide:
+        monkeypatch.setattr(search, "_incoming_arrays32", search._incoming_arrays)
     m = random_imdp(np.random.default_rng(3), n_states=200, max_succ=6, zero_lower=True)
     ptr, rows, states, lower, upper = search.incoming_index(
         m.successor, m.entry_row, m.row_state, m.lower, m.upper, m.n_states
@@ -323,6 +327,7 @@ def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split,
     np.testing.assert_array_equal(states, m.row_state[m.entry_row[order]])
     np.testing.assert_array_equal(lower, m.lower[order])
     np.testing.assert_array_equal(upper, m.upper[order])
+    assert rows.dtype == states.dtype == (np.int64 if wide else np.int32)
 
 
 def _upper_start(m: IMDP) -> tuple[np.ndarray, np.ndarray]:
