@@ -312,7 +312,8 @@ kernel takes a light copy, none."""
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
     slots = np.full(sel.size, -1, dtype=np.int64)
-    return regather_rows(sel, slots, NO_LAYOUT, row_ptr, remaining, succ, lower, gap, crit)
+    none = (NO_LAYOUT[0], NO_LAYOUT[1], succ[:0], NO_LAYOUT[3], NO_LAYOUT[4], NO_LAYOUT[5])
+    return regather_rows(sel, slots, none, row_ptr, remaining, succ, lower, gap, crit)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -328,7 +329,7 @@ def regather_rows(sel, slots, light, row_ptr, remaining, succ, lower, gap, crit)
         r = sel[i]
         new_ptr[i + 1] = new_ptr[i] + row_ptr[r + 1] - row_ptr[r]
     n = new_ptr[-1]
-    succ2 = np.empty(n, dtype=np.int64)
+    succ2 = np.empty(n, dtype=succ.dtype)
     lower2 = np.empty(n)
     gap2 = np.empty(n)
     crit2 = np.empty(sel.size, dtype=np.int64)
@@ -350,7 +351,7 @@ def regather_rows(sel, slots, light, row_ptr, remaining, succ, lower, gap, crit)
     return new_ptr, rem2, succ2, lower2, gap2, crit2
 
 
-def empty_slots(sel, row_ptr) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+def empty_slots(sel, row_ptr, succ_dtype=np.int64) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
     """A contiguous layout with one slot per row of ``sel`` (its length), unfilled, and its
     index of rows, ``-1`` everywhere (no slot holds a row yet): the light copy before the
     first full sweep fills it (:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`)."""
@@ -360,7 +361,7 @@ def empty_slots(sel, row_ptr) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
     layout = (
         ptr,
         np.empty(sel.size),
-        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=succ_dtype),
         np.empty(n),
         np.empty(n),
         np.empty(sel.size, dtype=np.int64),

@@ -56,6 +56,12 @@ model nearly every state moves in each of its 27 passes, and tracking from the s
 the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
+NARROW_STATES = int(np.iinfo(np.int32).max)
+"""Models with at most this many states keep the successors of the sweeps' layout (and of
+its light copy) as 32-bit integers, larger ones as 64-bit. The full sweeps stream the
+layout: on the random 100k-state benchmark model (4.6M entries) the uncertified solve took
+a median 5 % less in one process, alternating with 64-bit successors, the same values."""
+
 _NO_INDEX = np.empty(0, dtype=np.int64)
 _NO_FLAGS = np.empty(0, dtype=np.bool_)
 _NO_TOP = (np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.bool_))
@@ -108,7 +114,8 @@ class ReachSweeper:
         self.states, self.state_rows, self._position, rows, self.row_ptr, self.remaining = order
         self.rows = rows
         n_ent = int(self.row_ptr[-1])
-        self.succ = np.empty(n_ent, dtype=np.int64)
+        narrow = m.n_states <= NARROW_STATES
+        self.succ = np.empty(n_ent, dtype=np.int32 if narrow else np.int64)
         self.lower = np.empty(n_ent)
         self.gap = np.empty(n_ent)
         arrays = (rows, m.row_ptr, m.successor, m.lower, m.upper, self.row_ptr)
@@ -162,7 +169,9 @@ class ReachSweeper:
             layout = (self.row_ptr, self.remaining, self.succ, self.lower, self.gap, self.crit)
             if self._light is None:
                 # slots as long as the best rows, filled by the sweep (gauss_seidel_sweep)
-                self._light, self._light_rows = empty_slots(self.best_row, self.row_ptr)
+                self._light, self._light_rows = empty_slots(
+                    self.best_row, self.row_ptr, self.succ.dtype
+                )
             residual = self._full_sweep(v, layout, self._no_cache if bound is None else bound)
             if self._light_rows.size and self._light_rows.min() < 0:
                 # a best row of another length than its slot

@@ -330,6 +330,25 @@ def test_the_reverse_index_groups_the_entries_by_successor_in_entry_order(split,
     assert rows.dtype == states.dtype == (np.int64 if wide else np.int32)
 
 
+@pytest.mark.parametrize("certified", [False, True])
+def test_sweeps_on_64_bit_successors_give_the_same_solution(certified, monkeypatch):
+    """The sweeps' layout keeps its successors as 32-bit integers where the states fit; a
+    model beyond that (forced here) gets 64-bit ones and the same solution, bit for bit."""
+    from planner.imdp import Problem, ReachAvoid, Specification, ValueIteration, solve
+
+    m = random_imdp(np.random.default_rng(8), n_states=300, max_succ=6, zero_lower=True)
+    problem = Problem(m, Specification(ReachAvoid("goal", "bad")))
+    alg = ValueIteration(certified=certified)
+    narrow = solve(problem, alg)
+    assert _sweeper(m, True).succ.dtype == np.int32
+    monkeypatch.setattr(sweeps, "NARROW_STATES", 0)
+    assert _sweeper(m, True).succ.dtype == np.int64
+    wide = solve(problem, alg)
+    for name in ("values", "lower", "upper", "strategy"):
+        np.testing.assert_array_equal(getattr(wide, name), getattr(narrow, name))
+    assert wide.iterations == narrow.iterations
+
+
 def _upper_start(m: IMDP) -> tuple[np.ndarray, np.ndarray]:
     """Free rows (not at the goal or the absorbing sink 0) and ``U = 1`` there, the goal at
     1 and the sink at 0."""
