@@ -49,6 +49,12 @@ entries a light sweep) splitting them too took 37 sweeps to the tolerance instea
 and made the uncertified solve slower, and on the 100 x 100 benchmark grid (150k) a split
 light sweep took 0.88 ms instead of 0.74 ms inside interval iteration."""
 
+NARROW_STATES = int(np.iinfo(np.int32).max)
+"""Models with at most this many states keep the successors of the sweeps' layout (and of
+its light copy) as 32-bit integers, larger ones as 64-bit. The full sweeps stream the
+layout: on the random 100k-state benchmark model (4.6M entries) the uncertified solve took
+a median 5 % less in one process, alternating with 64-bit successors, the same values."""
+
 TRACK_START = 0.25
 """Tracked passes from above skip states once a pass has moved at most this fraction of
 the free states (:meth:`ReachSweeper.track_changes`). On the random 100k-state benchmark
@@ -56,12 +62,6 @@ model nearly every state moves in each of its 27 passes, and tracking from the s
 the certified solve 1.5-1.8x slower."""
 
 _NOT_TRACKED = np.empty(0, dtype=np.bool_)
-NARROW_STATES = int(np.iinfo(np.int32).max)
-"""Models with at most this many states keep the successors of the sweeps' layout (and of
-its light copy) as 32-bit integers, larger ones as 64-bit. The full sweeps stream the
-layout: on the random 100k-state benchmark model (4.6M entries) the uncertified solve took
-a median 5 % less in one process, alternating with 64-bit successors, the same values."""
-
 _NO_INDEX = np.empty(0, dtype=np.int64)
 _NO_FLAGS = np.empty(0, dtype=np.bool_)
 _NO_TOP = (np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.bool_))
