@@ -5,6 +5,7 @@ iteration, and the expanded interval MDP with the same values."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -176,8 +177,9 @@ def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: f
         if closed and np.max(raised - sol.lower, initial=0.0) >= tol:
             tries.insert(0, sol.upper)
         kept = None
+        check = _expansion_check(model, free, pessimistic)
         for u in tries:
-            shown, out = _verify_on_expansion(model, u, free, pessimistic)
+            shown, out = check(u)
             if shown:
                 upper = np.where(free, np.maximum(out, sol.lower), sol.upper)
                 width = float(np.max(upper - sol.lower, initial=0.0))
@@ -190,24 +192,29 @@ def shown_bracket(model: DecoupledIMDP, sol: Solution, pessimistic: bool, tol: f
     return replace(sol, upper=np.where(free, 1.0, sol.upper), converged=False)
 
 
-def _verify_on_expansion(
-    model: DecoupledIMDP, u: np.ndarray, free: np.ndarray, pessimistic: bool
-) -> tuple[bool, np.ndarray]:
-    """``(shown, U')`` of :func:`planner.imdp.certify.verify_upper` for the bound ``u`` on
-    the model's states, checked at the ``free`` ones on :func:`expanded_imdp` (each
-    auxiliary state valued at its point distribution's expectation of ``u``); ``U'`` on
-    the model's states."""
+def _expansion_check(
+    model: DecoupledIMDP, free: np.ndarray, pessimistic: bool
+) -> Callable[[np.ndarray], tuple[bool, np.ndarray]]:
+    """``check(u) -> (shown, U')``: :func:`planner.imdp.certify.verify_upper` of the bound
+    ``u`` on the model's states, checked at the ``free`` ones on :func:`expanded_imdp`
+    (each auxiliary state valued at its point distribution's expectation of ``u``); ``U'``
+    on the model's states. The expansion's entries of the auxiliary states and the rows
+    checked are found once, for every bound checked."""
     big, n = expanded_imdp(model)
-    x = np.empty(big.n_states)
-    x[:n] = u
     owner = big.row_state[big.entry_row]
     aux = owner >= n  # the auxiliary states' point distributions
-    x[n:] = np.bincount(
-        owner[aux] - n, big.lower[aux] * x[big.successor[aux]], minlength=big.n_states - n
-    )
+    aux_owner, aux_mass, aux_succ = owner[aux] - n, big.lower[aux], big.successor[aux]
     checked = np.concatenate([free, np.ones(big.n_states - n, dtype=bool)])
-    shown, out = verify_upper(big, np.flatnonzero(checked[big.row_state]), x, True, pessimistic)
-    return shown, out[:n]
+    rows = np.flatnonzero(checked[big.row_state])
+
+    def check(u: np.ndarray) -> tuple[bool, np.ndarray]:
+        x = np.empty(big.n_states)
+        x[:n] = u
+        x[n:] = np.bincount(aux_owner, aux_mass * x[aux_succ], minlength=big.n_states - n)
+        shown, out = verify_upper(big, rows, x, True, pessimistic)
+        return shown, out[:n]
+
+    return check
 
 
 def _rounding_raise(

@@ -351,10 +351,11 @@ def regather_rows(sel, slots, light, row_ptr, remaining, succ, lower, gap, crit)
     return new_ptr, rem2, succ2, lower2, gap2, crit2
 
 
-def empty_slots(sel, row_ptr, succ_dtype=np.int64) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+def empty_slots(sel, row_ptr, succ_dtype) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
     """A contiguous layout with one slot per row of ``sel`` (its length), unfilled, and its
     index of rows, ``-1`` everywhere (no slot holds a row yet): the light copy before the
-    first full sweep fills it (:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`)."""
+    first full sweep fills it (:func:`planner.imdp.kernels.gauss_seidel.gauss_seidel_sweep`).
+    ``succ_dtype``: the integer type of the layout's successors."""
     ptr = np.zeros(sel.size + 1, dtype=np.int64)
     np.cumsum(row_ptr[sel + 1] - row_ptr[sel], out=ptr[1:])
     n = int(ptr[-1])
