@@ -326,7 +326,8 @@ def side_by_side(name, model, path_formula, solve_fast, t_fast, solve_cert, firs
     """Storm's robust value iteration on the same model (DRN file), precision 1e-8 absolute,
     timed like hopnav's solves: model checking only, the least of ``SIDE_RUNS`` runs for
     each tool, taken in turns (one of each tool per round, so that a noisy stretch of the
-    machine falls on both alike) (``t_fast``, ``first_cert = (solution, seconds)``:
+    machine falls on both alike; every run is printed too, with the ratio of the medians)
+    (``t_fast``, ``first_cert = (solution, seconds)``:
     hopnav's first runs, already timed and counted; the model's reverse index, built by
     the first, is model data like Storm's built matrix)."""
     import os
@@ -357,10 +358,12 @@ def side_by_side(name, model, path_formula, solve_fast, t_fast, solve_cert, firs
 
     cert, t_cert = timed(solve_cert) if first_cert is None else first_cert
     res, t_storm = timed(storm)
+    runs = {"Storm": [t_storm], "uncertified": [t_fast], "certified": [t_cert]}
     for _ in range(SIDE_RUNS - 1):
-        t_storm = min(t_storm, timed(storm)[1])
-        t_fast = min(t_fast, timed(solve_fast)[1])
-        t_cert = min(t_cert, timed(solve_cert)[1])
+        runs["Storm"].append(timed(storm)[1])
+        runs["uncertified"].append(timed(solve_fast)[1])
+        runs["certified"].append(timed(solve_cert)[1])
+    t_storm, t_fast, t_cert = (min(runs[k]) for k in ("Storm", "uncertified", "certified"))
     values = np.array([res.get_value(i) for i in range(model.n_states)])
     diff = float(np.max(np.abs(values - cert.values)))
     # Storm stops on the change of an iteration, which does not bound its error: where
@@ -374,6 +377,12 @@ def side_by_side(name, model, path_formula, solve_fast, t_fast, solve_cert, firs
         f"{diff:.1e}; Storm outside hopnav's bracket (width {cert.error:.1e}, certified "
         f"{cert.converged}) at "
         f"{int((off > 0).sum())} states, by up to {max(float(off.max()), 0.0):.1e}"
+    )
+    # every run, in the order taken: the spread shows how noisy the machine was
+    spread = "; ".join(f"{k} " + " ".join(f"{t:.2f}" for t in ts) for k, ts in runs.items())
+    print(
+        f"    runs (s): {spread}; median ratio Storm / uncertified "
+        f"{np.median(runs['Storm']) / np.median(runs['uncertified']):.1f}x"
     )
 
 
