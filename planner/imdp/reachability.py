@@ -7,11 +7,11 @@ runs as two such halves at once, the later reading the earlier's values from bef
 sweep; :class:`planner.imdp.kernels.ReachSweeper`, compiled), with the exact adversary for the
 current values and ``max(old, new)``. Starting from ``V_0 <= T(V_0)``, every update stays
 below the least fixed point and the values only increase, which is what makes zero lower
-bounds and end components safe. For a maximising strategy only every ``FULL_EVERY``-th
-sweep evaluates all rows (and records each state's best row); the sweeps between evaluate
-the recorded best rows only (modified policy iteration: each such update is at most the
-full one, so it stays sound; for a minimising strategy it would not be, and every sweep is
-full).
+bounds and end components safe. For a maximising strategy only some sweeps evaluate all
+rows (and record each state's best row: :func:`planner.imdp.interval.full_due`); the sweeps
+between evaluate the recorded best rows only (modified policy iteration: each such update
+is at most the full one, so it stays sound; for a minimising strategy it would not be, and
+every sweep is full).
 
 **From above** (``certified``): the value is the *least* fixed point of the Bellman
 operator ``T`` (targets at 1), so by Knaster-Tarski every superharmonic ``U``
@@ -64,12 +64,7 @@ import numpy as np
 
 from planner._util.threads import concurrently
 from planner.imdp import certify, strategy
-from planner.imdp.interval import (
-    FULL_EVERY,
-    GLOBAL_REPAIR_STATES,
-    LOCAL_FRACTION,
-    interval_iteration,
-)
+from planner.imdp.interval import GLOBAL_REPAIR_STATES, LOCAL_FRACTION, full_due, interval_iteration
 from planner.imdp.kernels import ReachSweeper
 from planner.imdp.kernels.sweeps import sweep_layout
 from planner.imdp.model import IMDP, first_of_runs
@@ -388,8 +383,9 @@ class _ReachSweeps:
         while self.it < alg.max_iterations:
             self.it += 1
             check = self.it > self.next_eval
+            due = full_due(self.it, self.history, self.residual, not alg.certified)
             # a light sweep (one row per state) is a lower bound only when maximising
-            full = want_full or check or not self.maximize or self.it % FULL_EVERY == 1
+            full = want_full or check or not self.maximize or due
             before = self.v.copy() if check else self.v
             self.residual = self.sweeper.sweep(self.v, full)
             if alg.callback is not None:

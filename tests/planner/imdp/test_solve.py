@@ -28,6 +28,7 @@ from tests.planner.imdp.reference import (
 )
 
 solve_module = importlib.import_module("planner.imdp.reachability")
+interval = importlib.import_module("planner.imdp.interval")
 widening = importlib.import_module("planner.imdp.widening")
 
 
@@ -917,3 +918,43 @@ def test_the_layout_built_beside_the_probability_1_search_changes_nothing(certif
         assert len(built) == wrong
         outcomes.add(wrong)
     assert outcomes == {False, True}
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_plain_sweeps_evaluate_every_row_once_the_light_sweeps_have_settled(seed, monkeypatch):
+    # plain sweeps (uncertified, no strategy iteration): every row at the first sweep,
+    # then once the light sweeps since the last full one brought the change below
+    # LIGHT_FALL of that full sweep's, or after FULL_EVERY_MOST sweeps, or after a sweep
+    # below the tolerance (the stopping rule's full sweep); never otherwise
+    from planner.imdp.kernels import sweeps
+
+    log = []
+    plain_sweep = sweeps.ReachSweeper.sweep
+
+    def sweep(self, v, full=True, bound=None):
+        residual = plain_sweep(self, v, full, bound)
+        log.append((full, residual))
+        return residual
+
+    monkeypatch.setattr(sweeps.ReachSweeper, "sweep", sweep)
+    rng = np.random.default_rng(900 + seed)
+    m = sticky_imdp(rng, 80) if seed == 2 else random_imdp(rng, n_states=60, zero_lower=seed == 1)
+    tgt, avd = m.states_labelled("goal"), m.states_labelled("bad")
+    alg = ValueIteration(1e-12, certified=False, strategy_iteration=False)
+    got = solve(Problem(m, Specification(ReachAvoid(tgt, avd))), alg)
+    assert got.converged and len(log) == got.iterations
+    np.testing.assert_allclose(got.values, ref_reach(m, tgt, avd & ~tgt, True), atol=1e-8)
+    assert log[0][0]
+    last_full, fell = 0, 0
+    for i in range(1, len(log)):
+        full, (_, before) = log[i][0], log[i - 1]
+        since = i - last_full
+        by_fall = since > 1 and before < interval.LIGHT_FALL * log[last_full][1]
+        due = since >= interval.FULL_EVERY_MOST or by_fall or before < alg.tolerance
+        assert full == due, (i, log[max(0, i - 4) : i + 1])
+        if full:
+            fell += by_fall and since < interval.FULL_EVERY_MOST
+            last_full = i
+    assert sum(f for f, _ in log) >= 2
+    if seed < 2:
+        assert fell > 0  # the light sweeps settled before the longest gap
