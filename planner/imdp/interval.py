@@ -50,8 +50,8 @@ from planner.imdp.model import IMDP, first_of_runs
 from planner.imdp.problem import ValueIteration
 
 FULL_EVERY = 4
-"""Every this many rounds of interval iteration (and after a sweep below the tolerance) all
-rows are evaluated."""
+"""Every this many rounds of interval iteration, and sweeps of certified plain sweeps
+(:func:`full_due`), all rows are evaluated (and after a sweep below the tolerance)."""
 
 ADAPTIVE_FULL = True
 LIGHT_FALL = 0.1
