@@ -312,6 +312,8 @@ kernel takes a light copy, none."""
 def gather_rows(sel, row_ptr, remaining, succ, lower, gap, crit):
     """The rows ``sel`` of a layout as a new contiguous layout (crit re-based)."""
     slots = np.full(sel.size, -1, dtype=np.int64)
+    # no old copy; its successors of the layout's integer type, as the compiled
+    # regather_rows reads either array through one variable
     none = (NO_LAYOUT[0], NO_LAYOUT[1], succ[:0], NO_LAYOUT[3], NO_LAYOUT[4], NO_LAYOUT[5])
     return regather_rows(sel, slots, none, row_ptr, remaining, succ, lower, gap, crit)
 
