@@ -111,6 +111,62 @@ def test_unknown_label():
         m.states_labelled("Haz")
 
 
+def test_label_sets_of_every_kind_give_each_state_its_own_set():
+    """The constructor converts each distinct label set once; every state still gets the
+    set its own labels give, whatever container holds them (equal keys that stringify
+    differently, such as ``(1,)`` and ``(1.0,)``, stay apart)."""
+    n = 9
+    given = [
+        ("a", "b"),
+        ["b"],
+        "ab",  # a string is an iterable of one-letter labels, as any iterable
+        (x for x in ("c",)),
+        frozenset({"a"}),
+        ("a", "b"),
+        (1,),
+        (1.0,),
+        np.array(["b", "c"]),
+    ]
+    expected = [
+        {"a", "b"},
+        {"b"},
+        {"a", "b"},
+        {"c"},
+        {"a"},
+        {"a", "b"},
+        {"1"},
+        {"1.0"},
+        {"b", "c"},
+    ]
+    m = IMDP(n, np.arange(n), np.zeros(n, int), np.arange(n), np.ones(n), np.ones(n), labels=given)
+    assert m.propositions == ("1", "1.0", "a", "b", "c")
+    assert [set(ls) for ls in m.labels] == expected
+    col = {p: i for i, p in enumerate(m.propositions)}
+    for i, want in enumerate(expected):
+        assert {p for p in m.propositions if m.label_matrix[i, col[p]]} == want
+    assert m.states_labelled("b").tolist() == [bool({"b"} & w) for w in expected]
+    # more propositions than a 64-bit code of a row holds
+    many = [(f"p{i:02d}", f"p{(i + 1) % 70:02d}") for i in range(70)] + [()] * 2
+    k = len(many)
+    wide = IMDP(
+        k, np.arange(k), np.zeros(k, int), np.arange(k), np.ones(k), np.ones(k), labels=many
+    )
+    assert len(wide.propositions) == 70
+    assert [set(ls) for ls in wide.labels] == [set(ls) for ls in many]
+    # the first state whose set holds an undeclared label is named
+    with pytest.raises(UnknownLabelError, match="state 3 carries label"):
+        IMDP(
+            n,
+            np.arange(n),
+            np.zeros(n, int),
+            np.arange(n),
+            np.ones(n),
+            np.ones(n),
+            labels=[("a",)] * 3 + [("z",), ("a",)] + [("z",)] * 4,
+            propositions=("a",),
+        )
+
+
 def test_index_out_of_range_and_missing_rows():
     with pytest.raises(IndexOutOfRangeError, match="successor 2"):
         two_state(successor=[0, 2, 1])
