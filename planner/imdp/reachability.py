@@ -387,7 +387,7 @@ class _ReachSweeps:
             # a light sweep (one row per state) is a lower bound only when maximising
             full = want_full or check or not self.maximize or due
             before = self.v.copy() if check else self.v
-            self.residual = self.sweeper.sweep(self.v, full)
+            self.residual = self.sweeper.sweep(self.v, full, split=True)
             if alg.callback is not None:
                 alg.callback(self.it, self.residual)
             if full:

@@ -43,11 +43,17 @@ whose critical successor moved where a feasible distribution shows it below the 
 (:func:`gauss_seidel_sweep`'s ``bounded``)."""
 
 HALVES_SWEEP_ENTRIES = 100_000
-"""Entries of a full sweep from which :meth:`ReachSweeper.sweep` runs it in two halves at
-once. Light sweeps always run whole: on the random 100k-state benchmark model (580k
-entries a light sweep) splitting them too took 37 sweeps to the tolerance instead of 33
-and made the uncertified solve slower, and on the 100 x 100 benchmark grid (150k) a split
-light sweep took 0.88 ms instead of 0.74 ms inside interval iteration."""
+"""Entries of a full sweep (or of a light sweep asked to ``split``) from which
+:meth:`ReachSweeper.sweep` runs it in two halves at once. Only plain value iteration
+splits its light sweeps (its second core is idle between the full sweeps). Its uncertified
+solves, least of 4 in turns against whole light sweeps: the 100 x 100 benchmark grid
+(150k entries a light sweep), seeds 0-11, 4.79 s in all instead of 5.13 s, in about the
+same sweeps (seed 0 351 against 413 ms; seed 3 571 against 483 ms, its strategy iteration
+at sweep 129 on 1,707 moving states instead of 1,499; seed 7 1,017 sweeps instead of 932,
+782 against 878 ms); the random 100k-state
+model (580k), three draws, 0.63 s instead of 0.70 s, in 38-39 sweeps instead of 33.
+Interval iteration keeps them whole: its passes from above run on the second core
+meanwhile, and a split light sweep of the grid took 0.88 ms there instead of 0.74 ms."""
 
 NARROW_STATES = int(np.iinfo(np.int32).max)
 """Models with at most this many states keep the successors of the sweeps' layout (and of
@@ -154,13 +160,20 @@ class ReachSweeper:
         half = np.searchsorted(self.state_rows, np.searchsorted(self.row_ptr, n_ent // 2))
         self._cut = int(half) if n_ent >= HALVES_SWEEP_ENTRIES and half < self.states.size else 0
 
-    def sweep(self, v: np.ndarray, full: bool = True, bound: np.ndarray | None = None) -> float:
+    def sweep(
+        self,
+        v: np.ndarray,
+        full: bool = True,
+        bound: np.ndarray | None = None,
+        split: bool = False,
+    ) -> float:
         """One Gauss-Seidel sweep on ``v`` in place (see :func:`gauss_seidel_sweep`): all
         rows (``full``; those whose ``bound``, a per-row upper bound such as the row cache
         of the passes from above, is below the best found are skipped; from
         ``HALVES_SWEEP_ENTRIES`` entries on in two halves at once, :meth:`_full_sweep`) or
         the best rows of the last full sweep, from the contiguous copy it kept
-        (:func:`light_sweep`)."""
+        (:func:`light_sweep`; with ``split``, from ``HALVES_SWEEP_ENTRIES`` entries on in
+        two halves at once, as the full sweeps: :meth:`_light_sweep`)."""
         if self.before_sweep is not None:
             self.before_sweep()
         self._track(v)
@@ -178,11 +191,28 @@ class ReachSweeper:
                 self._light = regather_rows(self.best_row, self._light_rows, self._light, *layout)
                 self._light_rows = self.best_row.copy()
         else:
-            residual = float(
-                light_sweep(self.states, *self._light, v, self.adversary_minimizes, self._last)
-            )
+            residual = self._light_sweep(v, split)
         self._rise = rose(self._rise, residual)
         return residual
+
+    def _light_sweep(self, v: np.ndarray, split: bool) -> float:
+        """A :func:`light_sweep`; with ``split``, from ``HALVES_SWEEP_ENTRIES`` entries of
+        the copy on, a block Gauss-Seidel sweep of two halves of it (about equal entries)
+        at once, as :meth:`_full_sweep` runs the full ones."""
+        ptr, rem, succ, lower, gap, crit = self._light
+        st, n, side = self.states, self.states.size, self.adversary_minimizes
+        cut = int(np.searchsorted(ptr, ptr[-1] // 2)) if split else 0
+        if ptr[-1] < HALVES_SWEEP_ENTRIES or not 0 < cut < n:
+            return float(light_sweep(st, *self._light, v, side, self._last))
+
+        def part(first: int, last: int, values: np.ndarray) -> float:
+            rows = (ptr[first : last + 1], rem[first:last], succ, lower, gap, crit[first:last])
+            return light_sweep(st[first:last], *rows, values, side, self._last)
+
+        later = v.copy()
+        rest, first = concurrently(lambda: part(cut, n, later), lambda: part(0, cut, v), "sweep")
+        v[st[cut:]] = later[st[cut:]]
+        return float(max(rest, first))
 
     def _tighten(self, v: np.ndarray, snap: bool = False) -> None:
         """Lower the sum of rises to its value at the start of the last full sweep plus the

@@ -595,6 +595,58 @@ def test_a_full_sweep_in_halves_is_a_block_gauss_seidel_sweep(seed, monkeypatch)
     assert v.max() > 0.0
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_split_light_sweep_is_a_block_gauss_seidel_sweep_of_the_copy(seed, monkeypatch):
+    """A light sweep asked to ``split`` (forced on a small model) sweeps the two halves of
+    the best rows' copy at once: the later half (cut at half the copy's entries) reads the
+    earlier half's values from before the sweep, the values, critical successors and record
+    of written values are those of the two halves swept one after the other that way; not
+    asked to split, it is the whole light sweep."""
+    from planner.imdp.kernels.gauss_seidel import light_sweep
+
+    def earlier_half_first(background, foreground, purpose):
+        # the worst timing for a later half that read the shared values: after the earlier
+        out = foreground()
+        return background(), out
+
+    monkeypatch.setattr(sweeps, "HALVES_SWEEP_ENTRIES", 1)
+    monkeypatch.setattr(sweeps, "concurrently", earlier_half_first)
+    rng = np.random.default_rng(40 + seed)
+    m = random_imdp(rng, n_states=150, n_actions=3, max_succ=6, zero_lower=bool(seed % 2))
+    sw = _sweeper(m, True)
+    v = np.where(m.states_labelled("goal"), 1.0, 0.0)
+    sw.sweep(v, True)
+    ptr = sw._light[0]
+    cut = int(np.searchsorted(ptr, ptr[-1] // 2))
+    assert 0 < cut < sw.states.size
+    st, n = sw.states, sw.states.size
+    for k in range(5):
+        split = k != 2
+        light = tuple(a.copy() for a in sw._light)
+        want, last = v.copy(), sw._last.copy()
+        if split:
+            p, rem, succ, lo, gap, crit = light
+            later = want.copy()
+            halves = [(0, cut, want), (cut, n, later)]
+            res = [
+                light_sweep(
+                    st[a:b], p[a : b + 1], rem[a:b], succ, lo, gap, crit[a:b], x, True, last
+                )
+                for a, b, x in halves
+            ]
+            want[st[cut:]] = later[st[cut:]]
+            r_want = max(res)
+        else:
+            r_want = light_sweep(st, *light, want, True, last)
+        got = v.copy()
+        assert sw.sweep(got, False, split=split) == r_want
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(sw._light[5], light[5])
+        np.testing.assert_array_equal(sw._last, last)
+        v = got
+    assert v.max() > 0.0
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_dropping_states_continues_the_pruning_cascade_as_pruning_anew(seed):
     """Removing states in steps, through the cascade's state, ends where pruning all of
