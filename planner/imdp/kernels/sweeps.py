@@ -209,10 +209,7 @@ class ReachSweeper:
             rows = (ptr[first : last + 1], rem[first:last], succ, lower, gap, crit[first:last])
             return light_sweep(st[first:last], *rows, values, side, self._last)
 
-        later = v.copy()
-        rest, first = concurrently(lambda: part(cut, n, later), lambda: part(0, cut, v), "sweep")
-        v[st[cut:]] = later[st[cut:]]
-        return float(max(rest, first))
+        return _block_sweep(part, v, st, cut)
 
     def _tighten(self, v: np.ndarray, snap: bool = False) -> None:
         """Lower the sum of rises to its value at the start of the last full sweep plus the
@@ -273,10 +270,7 @@ class ReachSweeper:
         cut, n = self._cut, st.size
         if cut == 0:
             return float(part(0, n, v))
-        later = v.copy()
-        rest, first = concurrently(lambda: part(cut, n, later), lambda: part(0, cut, v), "sweep")
-        v[st[cut:]] = later[st[cut:]]
-        return float(max(rest, first))
+        return _block_sweep(part, v, st, cut)
 
     def track_changes(self, mark_above: float) -> None:
         """Prepare change tracking for the passes from above: a value that falls by more
@@ -444,6 +438,20 @@ class ReachSweeper:
         out = np.empty_like(q)
         out[self._position] = q
         return out
+
+
+def _block_sweep(
+    part: Callable[[int, int, np.ndarray], float], v: np.ndarray, states: np.ndarray, cut: int
+) -> float:
+    """A block Gauss-Seidel sweep of two halves at once: ``part(0, cut, v)`` here and
+    ``part(cut, n, later)`` on the ``"sweep"`` worker, ``later`` a copy of ``v`` from
+    before the sweep whose values of ``states[cut:]`` are then copied into ``v``; the
+    largest change of the two."""
+    later = v.copy()
+    n = states.size
+    rest, first = concurrently(lambda: part(cut, n, later), lambda: part(0, cut, v), "sweep")
+    v[states[cut:]] = later[states[cut:]]
+    return float(max(rest, first))
 
 
 def sweep_layout(
