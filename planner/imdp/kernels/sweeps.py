@@ -50,8 +50,8 @@ solves, least of 4 in turns against whole light sweeps: the 100 x 100 benchmark 
 (150k entries a light sweep), seeds 0-11, 4.79 s in all instead of 5.13 s, in about the
 same sweeps (seed 0 351 against 413 ms; seed 3 571 against 483 ms, its strategy iteration
 at sweep 129 on 1,707 moving states instead of 1,499; seed 7 1,017 sweeps instead of 932,
-782 against 878 ms); the random 100k-state
-model (580k), three draws, 0.63 s instead of 0.70 s, in 38-39 sweeps instead of 33.
+782 against 878 ms); the random 100k-state model (580k), three draws, 0.63 s instead of
+0.70 s, in 38-39 sweeps instead of 33.
 Interval iteration keeps them whole: its passes from above run on the second core
 meanwhile, and a split light sweep of the grid took 0.88 ms there instead of 0.74 ms."""
 
